@@ -1,0 +1,1 @@
+//! Constitutive models (placeholder, being written).

@@ -1,0 +1,1 @@
+//! Fast 3x3 SVD (placeholder, being written).
