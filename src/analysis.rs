@@ -1,1 +1,3 @@
-//! Analysis of runs
+//! Measurements of simulation results.
+
+pub mod collapse;

@@ -1,8 +1,11 @@
 //! sandstep: granular terrain for legged robots.
 //!
-//! Modules depend one way: [`mpm`] (the sand solver, no rigid bodies, no ROS) is used by
-//! [`scene`] (YAML scenes, building and running them) and [`analysis`] (metrics of runs).
+//! Modules depend one way: [`mpm`] (the sand solver: no rigid bodies, no ROS) and [`robot`]
+//! (the hexapod in rapier: no sand, no ROS) are used by [`scene`] (YAML scenes, building and
+//! running them); [`analysis`] measures runs and [`bench`] prints throughput figures.
 
 pub mod analysis;
+pub mod bench;
 pub mod mpm;
+pub mod robot;
 pub mod scene;

@@ -1,1 +1,569 @@
-//! Constitutive models (placeholder, being written).
+//! Constitutive models: Drucker-Prager sand on Hencky St. Venant-Kirchhoff elasticity, and
+//! fixed-corotated elasticity for elastic test bodies.
+//!
+//! Every model works on the elastic deformation gradient `F` (dimensionless) of a particle and
+//! gives the Kirchhoff stress `tau = J sigma` (Pa), which is what MLS-MPM's P2G needs
+//! (`docs/physics.md`, sections 1-2). Both stresses have the form `tau = U diag(t) U^T` from the
+//! rotation-variant SVD `F = U diag(sigma) V^T` ([`svd3`]), so they are symmetric bit for bit.
+//!
+//! References:
+//! - Klar, Gast, Pradhana, Fu, Schroeder, Jiang, Teran 2016, "Drucker-Prager elastoplasticity
+//!   for sand animation" (Hencky St. Venant-Kirchhoff energy, principal-space return mapping).
+//! - Tampubolon, Gast, Klar, Fu, Teran, Jiang, Museth 2017, "Multi-species simulation of porous
+//!   sand and water mixtures" (volume correction).
+//! - Stomakhin, Schroeder, Chai, Teran, Selle 2013, "A material point method for snow
+//!   simulation" (fixed-corotated energy).
+//! - Mast et al. 2014 and Gao, Tampubolon, Jiang, Sifakis 2017, "An adaptive generalized
+//!   interpolation material point method for simulating elastoplastic materials" (Hencky StVK
+//!   with Drucker-Prager in MPM).
+
+use crate::mpm::svd::{svd3, svd3_x4, Svd3};
+use nalgebra::{Matrix3, Vector3};
+
+/// Floor on singular values before taking logarithms (dimensionless): a particle compressed
+/// below this stretch, or inverted (negative `sigma[2]` of the rotation-variant SVD, whose
+/// absolute value is used), is treated as stretched by this much. ln(1e-6) = -13.8.
+pub const MIN_SINGULAR_VALUE: f32 = 1e-6;
+
+/// Lamé parameters (Pa).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Lame {
+    /// Shear modulus mu (Pa).
+    pub mu: f32,
+    /// First Lamé parameter lambda (Pa).
+    pub lambda: f32,
+}
+
+impl Lame {
+    /// From Young's modulus E (Pa) and Poisson's ratio nu (dimensionless, -1 < nu < 0.5):
+    /// `mu = E / (2 (1 + nu))`, `lambda = E nu / ((1 + nu) (1 - 2 nu))`.
+    pub fn from_young_poisson(youngs_modulus_pa: f32, poisson_ratio: f32) -> Self {
+        let (e, nu) = (youngs_modulus_pa, poisson_ratio);
+        Self {
+            mu: e / (2.0 * (1.0 + nu)),
+            lambda: e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)),
+        }
+    }
+}
+
+/// Drucker-Prager sand on Hencky St. Venant-Kirchhoff elasticity (Klar et al. 2016), cohesionless,
+/// with optional volume correction (Tampubolon et al. 2017).
+#[derive(Clone, Copy, Debug)]
+pub struct DruckerPrager {
+    /// Elastic moduli (Pa).
+    pub lame: Lame,
+    /// cone slope alpha = sqrt(2/3) * 2 sin(phi) / (3 - sin(phi)) (dimensionless), phi the
+    /// friction angle.
+    pub alpha: f32,
+    /// Remember the volume removed by projections to the cone tip and give it back on later
+    /// compression, so sand does not gain volume every time it is pulled apart.
+    pub volume_correction: bool,
+}
+
+impl DruckerPrager {
+    /// `friction_angle_rad`: internal friction angle phi (rad), typically 30-40 deg for sand.
+    pub fn new(lame: Lame, friction_angle_rad: f32, volume_correction: bool) -> Self {
+        let sin_phi = friction_angle_rad.sin();
+        Self {
+            lame,
+            alpha: (2.0f32 / 3.0).sqrt() * 2.0 * sin_phi / (3.0 - sin_phi),
+            volume_correction,
+        }
+    }
+}
+
+/// Fixed-corotated elasticity (elastic test bodies; Stomakhin et al. 2013):
+/// `Psi = mu |F - R|^2 + lambda/2 (J - 1)^2`.
+#[derive(Clone, Copy, Debug)]
+pub struct FixedCorotated {
+    /// Elastic moduli (Pa).
+    pub lame: Lame,
+}
+
+/// The constitutive model of a particle set.
+#[derive(Clone, Copy, Debug)]
+pub enum Constitutive {
+    DruckerPrager(DruckerPrager),
+    FixedCorotated(FixedCorotated),
+}
+
+impl Constitutive {
+    /// End-of-substep constitutive update of one particle: projects the trial elastic deformation
+    /// gradient `f` in place onto the admissible set (plasticity; no-op for elastic), updates the
+    /// volume-correction scalar `volume_correction` (log-volume, sand only; untouched otherwise),
+    /// and returns the Kirchhoff stress tau (Pa) of the projected F. One SVD per call.
+    ///
+    /// Sand: `F <- U exp(eps) V^T` with `eps` from [`drucker_prager_return`]; `f` is left bit for
+    /// bit unchanged when the return mapping changes nothing (inside the cone, no stored volume).
+    /// The projected F always has positive singular values, so an inverted particle is restored.
+    /// With volume correction off the scalar is set to 0.
+    pub fn update(&self, f: &mut Matrix3<f32>, volume_correction: &mut f32) -> Matrix3<f32> {
+        self.update_with_svd(&svd3(f), f, volume_correction)
+    }
+
+    /// [`Self::update`] of four particles at once, bit for bit the same results: the four SVDs
+    /// share one [`svd3_x4`] call, which costs about as much as one [`svd3`].
+    pub fn update_x4(
+        &self,
+        f: &mut [Matrix3<f32>; 4],
+        volume_correction: &mut [f32; 4],
+    ) -> [Matrix3<f32>; 4] {
+        let svds = svd3_x4(f);
+        let mut tau = [Matrix3::zeros(); 4];
+        for (l, tau) in tau.iter_mut().enumerate() {
+            *tau = self.update_with_svd(&svds[l], &mut f[l], &mut volume_correction[l]);
+        }
+        tau
+    }
+
+    /// Kirchhoff stress (Pa) of a given F without any projection (used at initialisation).
+    ///
+    /// Hencky StVK: `tau = U diag(2 mu eps + lambda tr(eps)) U^T`, `eps = ln max(|sigma|, floor)`.
+    /// Fixed corotated: `tau = 2 mu (F - R) F^T + lambda (J - 1) J I` with `R = U V^T`, `J = det F`,
+    /// evaluated as `U diag(2 mu (sigma - 1) sigma + lambda (J - 1) J) U^T` (the same tensor).
+    pub fn kirchhoff_stress(&self, f: &Matrix3<f32>) -> Matrix3<f32> {
+        self.stress_from_svd(&svd3(f))
+    }
+
+    fn update_with_svd(
+        &self,
+        svd: &Svd3,
+        f: &mut Matrix3<f32>,
+        volume_correction: &mut f32,
+    ) -> Matrix3<f32> {
+        let Self::DruckerPrager(dp) = self else {
+            return self.stress_from_svd(svd);
+        };
+        let Svd3 { u, sigma, v } = svd;
+        let eps_trial = hencky_strain(sigma);
+        let (eps, vc) = drucker_prager_return(
+            eps_trial,
+            *volume_correction,
+            dp.lame,
+            dp.alpha,
+            dp.volume_correction,
+        );
+        if eps != eps_trial || sigma[2] < MIN_SINGULAR_VALUE {
+            let mut us = *u;
+            for k in 0..3 {
+                us.column_mut(k).scale_mut(eps[k].exp());
+            }
+            *f = us * v.transpose();
+        }
+        *volume_correction = vc;
+        principal_to_tensor(u, &hencky_principal_stress(dp.lame, &eps))
+    }
+
+    fn stress_from_svd(&self, Svd3 { u, sigma, .. }: &Svd3) -> Matrix3<f32> {
+        let principal = match self {
+            Self::DruckerPrager(dp) => hencky_principal_stress(dp.lame, &hencky_strain(sigma)),
+            Self::FixedCorotated(fc) => {
+                let Lame { mu, lambda } = fc.lame;
+                let j = sigma.product();
+                sigma.map(|s| 2.0 * mu * (s - 1.0) * s + lambda * (j - 1.0) * j)
+            }
+        };
+        principal_to_tensor(u, &principal)
+    }
+
+    /// Elastic moduli of the model (Pa), e.g. for the time-step bound.
+    pub fn lame(&self) -> Lame {
+        match self {
+            Self::DruckerPrager(dp) => dp.lame,
+            Self::FixedCorotated(fc) => fc.lame,
+        }
+    }
+}
+
+/// Pure principal-space Drucker-Prager return mapping (for tests and reuse): given trial Hencky
+/// strain `eps` (log of singular values) and the volume-correction scalar, returns the projected
+/// strain and the new volume-correction value. Algorithm (physics.md section 2): eps += vc/3 if
+/// volume correction is on; tr = sum eps; eps_hat = eps - tr/3; if tr >= 0 -> eps = 0 (tip);
+/// else dgamma = |eps_hat| + (3 lambda + 2 mu)/(2 mu) * tr * alpha; dgamma <= 0 -> unchanged;
+/// else eps -= dgamma * eps_hat/|eps_hat|. New vc = vc + log det(F_trial) - log det(F_new)
+/// = vc + sum(eps_trial_original) - sum(eps_new) when volume correction is on, else 0.
+///
+/// Consequences: vc grows only at the tip (by the volume gain of the expansion) and is consumed
+/// entirely by the next update that ends inside or on the side of the cone.
+pub fn drucker_prager_return(
+    eps: Vector3<f32>,
+    volume_correction: f32,
+    lame: Lame,
+    alpha: f32,
+    use_volume_correction: bool,
+) -> (Vector3<f32>, f32) {
+    let eps_trial = eps;
+    let eps = if use_volume_correction {
+        eps.add_scalar(volume_correction / 3.0)
+    } else {
+        eps
+    };
+    let tr = eps.sum();
+    let projected = if tr >= 0.0 {
+        Vector3::zeros()
+    } else {
+        let eps_hat = eps.add_scalar(-tr / 3.0);
+        let eps_hat_norm = eps_hat.norm();
+        let dgamma =
+            eps_hat_norm + (3.0 * lame.lambda + 2.0 * lame.mu) / (2.0 * lame.mu) * tr * alpha;
+        if dgamma <= 0.0 {
+            eps
+        } else {
+            eps - eps_hat * (dgamma / eps_hat_norm)
+        }
+    };
+    let vc = if use_volume_correction {
+        volume_correction + eps_trial.sum() - projected.sum()
+    } else {
+        0.0
+    };
+    (projected, vc)
+}
+
+/// Hencky strain `ln max(|sigma|, MIN_SINGULAR_VALUE)` of singular values.
+fn hencky_strain(sigma: &Vector3<f32>) -> Vector3<f32> {
+    sigma.map(|s| s.abs().max(MIN_SINGULAR_VALUE).ln())
+}
+
+/// Principal Kirchhoff stresses (Pa) of Hencky StVK: `2 mu eps + lambda tr(eps)`.
+fn hencky_principal_stress(lame: Lame, eps: &Vector3<f32>) -> Vector3<f32> {
+    (eps * (2.0 * lame.mu)).add_scalar(lame.lambda * eps.sum())
+}
+
+/// `U diag(t) U^T`, computed on one triangle and mirrored (exactly symmetric).
+fn principal_to_tensor(u: &Matrix3<f32>, t: &Vector3<f32>) -> Matrix3<f32> {
+    Matrix3::from_fn(|i, j| {
+        let (i, j) = (i.min(j), i.max(j));
+        (0..3).map(|k| u[(i, k)] * t[k] * u[(j, k)]).sum()
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::rngs::SmallRng;
+    use rand::{Rng, SeedableRng};
+    use rand_distr::StandardNormal;
+
+    const PHI: f32 = 35.0 * std::f32::consts::PI / 180.0;
+
+    fn lame() -> Lame {
+        Lame::from_young_poisson(3.5e5, 0.3)
+    }
+
+    fn sand(volume_correction: bool) -> Constitutive {
+        Constitutive::DruckerPrager(DruckerPrager::new(lame(), PHI, volume_correction))
+    }
+
+    fn jello() -> Constitutive {
+        Constitutive::FixedCorotated(FixedCorotated { lame: lame() })
+    }
+
+    fn rotation(rng: &mut SmallRng) -> Matrix3<f32> {
+        let q = nalgebra::Quaternion::from(nalgebra::Vector4::from_fn(|_, _| {
+            rng.sample::<f32, _>(StandardNormal)
+        }));
+        *nalgebra::UnitQuaternion::from_quaternion(q)
+            .to_rotation_matrix()
+            .matrix()
+    }
+
+    fn gaussian(rng: &mut SmallRng) -> Matrix3<f32> {
+        Matrix3::from_fn(|_, _| rng.sample(StandardNormal))
+    }
+
+    fn random_strain(rng: &mut SmallRng, amp: f32) -> Vector3<f32> {
+        Vector3::from_fn(|_, _| rng.random_range(-amp..amp))
+    }
+
+    /// Cone function: <= 0 inside, 0 on the cone.
+    fn yield_value(eps: &Vector3<f32>, l: Lame, alpha: f32) -> f32 {
+        let tr = eps.sum();
+        eps.add_scalar(-tr / 3.0).norm() + (3.0 * l.lambda + 2.0 * l.mu) / (2.0 * l.mu) * tr * alpha
+    }
+
+    #[test]
+    fn lame_from_young_poisson() {
+        let l = Lame::from_young_poisson(1e6, 0.3);
+        assert!((l.mu - 1e6 / 2.6).abs() < 1e-6 * l.mu, "{l:?}");
+        assert!(
+            (l.lambda - 0.3e6 / (1.3 * 0.4)).abs() < 1e-6 * l.lambda,
+            "{l:?}"
+        );
+        let alpha = DruckerPrager::new(l, PHI, true).alpha as f64;
+        let sin = (PHI as f64).sin();
+        assert!((alpha - (2.0f64 / 3.0).sqrt() * 2.0 * sin / (3.0 - sin)).abs() < 1e-6);
+        assert_eq!(sand(true).lame(), lame());
+        assert_eq!(jello().lame(), lame());
+    }
+
+    #[test]
+    fn return_mapping_lands_in_cone() {
+        let mut rng = SmallRng::seed_from_u64(10);
+        for i in 0..20_000 {
+            let l =
+                Lame::from_young_poisson(rng.random_range(1e4..1e8), rng.random_range(0.0..0.45));
+            let alpha = DruckerPrager::new(l, rng.random_range(0.0..0.8), true).alpha;
+            let eps = random_strain(&mut rng, [1e-3, 0.1, 1.0][i % 3]);
+            let vc = if i % 2 == 0 {
+                rng.random_range(0.0..0.3)
+            } else {
+                0.0
+            };
+            for use_vc in [false, true] {
+                let (new, _) = drucker_prager_return(eps, vc, l, alpha, use_vc);
+                let tol = 1e-6 * (1.0 + eps.norm() + vc);
+                assert!(new.sum() <= tol, "{eps:?} -> {new:?}");
+                assert!(yield_value(&new, l, alpha) <= tol, "{eps:?} -> {new:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn inside_cone_is_unchanged() {
+        let l = lame();
+        let alpha = DruckerPrager::new(l, PHI, true).alpha;
+        let mut rng = SmallRng::seed_from_u64(11);
+        let mut tested = 0;
+        for _ in 0..20_000 {
+            let eps = random_strain(&mut rng, 0.2);
+            if eps.sum() >= 0.0 || yield_value(&eps, l, alpha) > -1e-4 {
+                continue;
+            }
+            tested += 1;
+            for use_vc in [false, true] {
+                assert_eq!(
+                    drucker_prager_return(eps, 0.0, l, alpha, use_vc),
+                    (eps, 0.0)
+                );
+            }
+        }
+        assert!(tested > 1000, "{tested}");
+    }
+
+    #[test]
+    fn expansion_goes_to_tip() {
+        let l = lame();
+        let alpha = DruckerPrager::new(l, PHI, true).alpha;
+        let mut rng = SmallRng::seed_from_u64(12);
+        let mut tested = 0;
+        for _ in 0..10_000 {
+            let eps = random_strain(&mut rng, 0.3);
+            if eps.sum() < 0.0 {
+                continue;
+            }
+            tested += 1;
+            assert_eq!(
+                drucker_prager_return(eps, 0.0, l, alpha, false),
+                (Vector3::zeros(), 0.0)
+            );
+            let (new, vc) = drucker_prager_return(eps, 0.1, l, alpha, true);
+            assert_eq!(new, Vector3::zeros());
+            assert!((vc - (0.1 + eps.sum())).abs() < 1e-6, "{vc}");
+        }
+        assert!(tested > 1000, "{tested}");
+        // Exactly hydrostatic zero strain is the tip itself.
+        assert_eq!(
+            drucker_prager_return(Vector3::zeros(), 0.0, l, alpha, false).0,
+            Vector3::zeros()
+        );
+    }
+
+    #[test]
+    fn volume_correction_gives_volume_back() {
+        let mut rng = SmallRng::seed_from_u64(13);
+        let stretch = 1.05f32;
+        for trial in 0..50 {
+            let (r1, r2) = (rotation(&mut rng), rotation(&mut rng));
+            let mut final_det = [0.0f32; 2];
+            for (k, use_vc) in [false, true].into_iter().enumerate() {
+                let model = sand(use_vc);
+                let mut vc = 0.0;
+                // Pull apart: lands on the tip, stores the volume gain 3 ln(stretch).
+                let mut f = r1 * stretch;
+                let tau = model.update(&mut f, &mut vc);
+                assert!(tau.norm() < 1e-3, "{tau}");
+                assert!((f.determinant() - 1.0).abs() < 1e-5);
+                let expect_vc = if use_vc { 3.0 * stretch.ln() } else { 0.0 };
+                assert!((vc - expect_vc).abs() < 1e-5, "{vc}");
+                // Compress by the same amount, with a little shear.
+                let shear = if trial % 2 == 0 { 0.0 } else { 0.01 };
+                let mut g = Matrix3::identity();
+                g[(0, 1)] = shear;
+                f = r2 * g * f / stretch;
+                model.update(&mut f, &mut vc);
+                final_det[k] = f.determinant();
+            }
+            let [without, with] = final_det;
+            assert!((with - 1.0).abs() < 1e-3, "with correction det F = {with}");
+            assert!(
+                (without - 1.0 / stretch.powi(3)).abs() < 1e-3,
+                "without: {without}"
+            );
+            assert!(
+                (1.0 - without) - (with - 1.0).abs() > 0.1,
+                "{with} vs {without}"
+            );
+        }
+    }
+
+    #[test]
+    fn elastic_update_and_rotations() {
+        let mut rng = SmallRng::seed_from_u64(14);
+        let l = lame();
+        for _ in 0..2_000 {
+            let f0 = rotation(&mut rng) * (Matrix3::identity() + 0.2 * gaussian(&mut rng));
+            let (mut f, mut vc) = (f0, 0.25);
+            let tau = jello().update(&mut f, &mut vc);
+            assert_eq!(
+                (f, vc),
+                (f0, 0.25),
+                "fixed corotated must not touch F or vc"
+            );
+            assert_eq!(tau, jello().kirchhoff_stress(&f0));
+            for model in [jello(), sand(true)] {
+                let tau = model.kirchhoff_stress(&f0);
+                assert_eq!(tau, tau.transpose(), "stress must be symmetric");
+                let r = rotation(&mut rng);
+                let tau = model.kirchhoff_stress(&r);
+                assert!(tau.norm() < 1e-5 * (l.mu + l.lambda), "{model:?} {tau}");
+            }
+            // A sand update of a rotation is a no-op with zero stress.
+            let r = rotation(&mut rng);
+            let (mut f, mut vc) = (r, 0.0);
+            let tau = sand(true).update(&mut f, &mut vc);
+            assert!(
+                tau.norm() < 1e-5 * (l.mu + l.lambda) && (f - r).norm() < 1e-6 && vc.abs() < 1e-6
+            );
+        }
+    }
+
+    #[test]
+    fn small_stretch_matches_linear_elasticity() {
+        let l = lame();
+        for model in [jello(), sand(false)] {
+            for axis in 0..3 {
+                for delta in [5e-4f32, -5e-4] {
+                    let mut f = Matrix3::identity();
+                    f[(axis, axis)] += delta;
+                    // Linear elasticity on the small strain of this (f32) F, in f64.
+                    let e = f.cast::<f64>() - Matrix3::identity();
+                    let linear = Matrix3::identity() * (l.lambda as f64 * e.trace())
+                        + e * (2.0 * l.mu as f64);
+                    let tau = model.kirchhoff_stress(&f).cast::<f64>();
+                    let rel = (tau - linear).norm() / linear.norm();
+                    assert!(rel < 1e-3, "{model:?} delta {delta}: relative error {rel}");
+                }
+            }
+            // Stretches along arbitrary directions: the same stress, rotated (objectivity).
+            let mut rng = SmallRng::seed_from_u64(15);
+            let f = Matrix3::from_diagonal(&Vector3::new(1.002, 1.0, 1.0));
+            let tau = model.kirchhoff_stress(&f);
+            for _ in 0..200 {
+                let q = rotation(&mut rng);
+                let rotated = model.kirchhoff_stress(&(q * f * q.transpose()));
+                let rel = (rotated - q * tau * q.transpose()).norm() / tau.norm();
+                assert!(rel < 1e-3, "{model:?}: relative error {rel}");
+            }
+        }
+    }
+
+    #[test]
+    fn sand_update_is_consistent() {
+        // The updated F lies in the cone, and the returned stress is the stress of that F.
+        let mut rng = SmallRng::seed_from_u64(16);
+        let model = sand(true);
+        let Constitutive::DruckerPrager(dp) = model else {
+            unreachable!()
+        };
+        for i in 0..5_000 {
+            let amp = [0.01, 0.1, 0.3][i % 3];
+            let f0 = rotation(&mut rng) * (Matrix3::identity() + amp * gaussian(&mut rng));
+            let (mut f, mut vc) = (f0, if i % 2 == 0 { 0.05 } else { 0.0 });
+            let tau = model.update(&mut f, &mut vc);
+            assert!(vc >= -1e-6 && f.iter().all(|x| x.is_finite()));
+            let eps = hencky_strain(&svd3(&f).sigma);
+            assert!(
+                eps.sum() <= 1e-5 && yield_value(&eps, dp.lame, dp.alpha) <= 1e-5,
+                "{eps:?}"
+            );
+            let again = model.kirchhoff_stress(&f);
+            assert!(
+                (tau - again).norm() <= 1e-4 * (dp.lame.mu + dp.lame.lambda),
+                "{tau} {again}"
+            );
+        }
+        // Inverted and collapsed particles come back with finite, non-inverted F.
+        for f0 in [
+            Matrix3::from_diagonal(&Vector3::new(0.9, 0.9, -0.9)),
+            Matrix3::zeros(),
+        ] {
+            let (mut f, mut vc) = (f0, 0.0);
+            let tau = model.update(&mut f, &mut vc);
+            assert!(
+                f.determinant() > 0.0 && tau.iter().all(|x| x.is_finite()),
+                "{f}"
+            );
+        }
+    }
+
+    #[test]
+    fn update_x4_matches_update() {
+        let mut rng = SmallRng::seed_from_u64(17);
+        for model in [sand(true), sand(false), jello()] {
+            for _ in 0..500 {
+                let f0: [Matrix3<f32>; 4] = std::array::from_fn(|_| {
+                    rotation(&mut rng) * (Matrix3::identity() + 0.1 * gaussian(&mut rng))
+                });
+                let vc0: [f32; 4] = std::array::from_fn(|_| rng.random_range(0.0..0.1));
+                let (mut f4, mut vc4) = (f0, vc0);
+                let tau4 = model.update_x4(&mut f4, &mut vc4);
+                for l in 0..4 {
+                    let (mut f, mut vc) = (f0[l], vc0[l]);
+                    assert_eq!(model.update(&mut f, &mut vc), tau4[l]);
+                    assert_eq!((f, vc), (f4[l], vc4[l]));
+                }
+            }
+        }
+    }
+
+    /// `cargo test --release --lib mpm::material::tests::bench -- --ignored --nocapture`
+    #[test]
+    #[ignore]
+    fn bench_update() {
+        let mut rng = SmallRng::seed_from_u64(18);
+        let f0: Vec<Matrix3<f32>> = (0..4096)
+            .map(|_| rotation(&mut rng) * (Matrix3::identity() + 0.01 * gaussian(&mut rng)))
+            .collect();
+        let model = sand(true);
+        type Run<'a> = &'a dyn Fn(&mut [Matrix3<f32>], &mut [f32]) -> f32;
+        let time = |name: &str, f: Run| {
+            let mut best = f64::INFINITY;
+            for _ in 0..200 {
+                let (mut fs, mut vcs) = (f0.clone(), vec![0.0; f0.len()]);
+                let start = std::time::Instant::now();
+                std::hint::black_box(f(&mut fs, &mut vcs));
+                best = best.min(start.elapsed().as_secs_f64());
+            }
+            println!(
+                "{name}: {:.1} ns per particle",
+                best * 1e9 / f0.len() as f64
+            );
+        };
+        time("Constitutive::update (sand)", &|fs, vcs| {
+            fs.iter_mut()
+                .zip(vcs.iter_mut())
+                .map(|(f, vc)| model.update(f, vc)[(0, 1)])
+                .sum()
+        });
+        time("Constitutive::update_x4 (sand)", &|fs, vcs| {
+            let quads = fs.chunks_exact_mut(4).zip(vcs.chunks_exact_mut(4));
+            quads
+                .map(|(f, vc)| {
+                    let tau = model.update_x4(f.try_into().unwrap(), vc.try_into().unwrap());
+                    tau[0][(0, 1)]
+                })
+                .sum()
+        });
+    }
+}

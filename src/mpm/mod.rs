@@ -3,5 +3,14 @@
 //! Knows nothing of rigid bodies or ROS. One [`Solver::substep`] is P2G, grid update, G2P
 //! (see `docs/physics.md`, section 1), each stage timed by name in [`StageTimes`].
 
+pub mod boundary;
+pub mod grid;
+pub mod kernel;
 pub mod material;
+pub mod particles;
+pub mod solver;
 pub mod svd;
+
+pub use boundary::{Wall, Walls};
+pub use particles::{NewParticle, Particles};
+pub use solver::{SimError, Solver, SolverMaterial, SolverSettings, StageTimes, TimeStep};

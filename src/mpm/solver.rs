@@ -1,0 +1,858 @@
+//! The MLS-MPM solver: particles, sparse grid, and the explicit substep.
+
+use std::time::{Duration, Instant};
+
+use nalgebra::{Matrix3, Vector3};
+use rayon::prelude::*;
+
+use super::boundary::Walls;
+use super::grid::{
+    arena_slots, node_in_arena, ArenaSlot, Block, ParticleBlock, SparseGrid, ARENA_NODES,
+    BLOCK_EDGE,
+};
+use super::kernel::Stencil;
+use super::material::Constitutive;
+use super::particles::{MaterialId, NewParticle, Particles};
+
+/// Particles whose constitutive updates run together (the SVD's SIMD width).
+const LANES: usize = 4;
+
+/// A material the particles can be made of.
+#[derive(Clone, Debug)]
+pub struct SolverMaterial {
+    /// Name from the scene file, for messages.
+    pub name: String,
+    /// Mass density rho (kg/m^3) of the undeformed material.
+    pub density_kg_m3: f32,
+    /// Elasticity and plasticity.
+    pub model: Constitutive,
+}
+
+impl SolverMaterial {
+    /// Dilatational wave speed `sqrt((lambda + 2 mu) / rho)` (m/s), which bounds the time step.
+    pub fn wave_speed_m_s(&self) -> f32 {
+        let lame = self.model.lame();
+        ((lame.lambda + 2.0 * lame.mu) / self.density_kg_m3).sqrt()
+    }
+}
+
+/// How the time step is chosen.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum TimeStep {
+    /// `dt = cfl * dx / (c + max |v_p|)`, at most `max_dt_s`.
+    Adaptive { cfl: f32, max_dt_s: f32 },
+    /// A fixed step (s), whatever the CFL condition says.
+    Fixed { dt_s: f32 },
+}
+
+/// Everything the solver needs besides particles and materials.
+#[derive(Clone, Debug)]
+pub struct SolverSettings {
+    /// Grid node spacing (m).
+    pub dx: f32,
+    /// Min corner of the domain box (m); also the grid origin.
+    pub domain_min: Vector3<f32>,
+    /// Max corner of the domain box (m).
+    pub domain_max: Vector3<f32>,
+    /// How each wall of the box acts on the sand.
+    pub walls: Walls,
+    /// Gravitational acceleration (m/s^2).
+    pub gravity: Vector3<f32>,
+    pub time_step: TimeStep,
+    /// A particle faster than this (m/s) means the simulation has blown up.
+    pub blowup_speed_m_s: f32,
+}
+
+/// Wall time spent in each stage of the substep, by name.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct StageTimes {
+    /// Sorting particles by grid block.
+    pub sort: Duration,
+    /// Finding active blocks and clearing their nodes.
+    pub grid_alloc: Duration,
+    /// Particle to grid transfer (fused APIC momentum and stress).
+    pub p2g: Duration,
+    /// Grid velocities, gravity, walls.
+    pub grid_update: Duration,
+    /// Grid to particle transfer, advection, constitutive update, blow-up check.
+    pub g2p: Duration,
+}
+
+impl StageTimes {
+    /// `(name, time)` of every stage, in substep order.
+    pub fn named(&self) -> [(&'static str, Duration); 5] {
+        [
+            ("sort", self.sort),
+            ("grid_alloc", self.grid_alloc),
+            ("p2g", self.p2g),
+            ("grid_update", self.grid_update),
+            ("g2p", self.g2p),
+        ]
+    }
+
+    pub fn total(&self) -> Duration {
+        self.named().iter().map(|(_, t)| *t).sum()
+    }
+}
+
+/// A simulation that cannot go on.
+#[derive(thiserror::Error, Debug, Clone)]
+pub enum SimError {
+    #[error(
+        "simulation blew up at step {step} (t = {time_s:.6} s, dt = {dt_s:.3e} s): particle {particle} {what} \
+         (position {position:?} m, velocity {velocity:?} m/s); reduce the time step (solver.cfl, \
+         solver.max_dt_s, solver.fixed_dt_s) or check the material parameters"
+    )]
+    BlowUp {
+        step: u64,
+        time_s: f64,
+        dt_s: f32,
+        /// Persistent id of the worst particle.
+        particle: u32,
+        what: String,
+        position: [f32; 3],
+        velocity: [f32; 3],
+    },
+}
+
+/// The first bad particle found by G2P, by sorted index.
+#[derive(Clone, Debug)]
+struct BadParticle {
+    index: usize,
+    what: String,
+}
+
+/// Result of G2P over one block.
+#[derive(Clone, Debug, Default)]
+struct G2pSummary {
+    max_speed_sq: f32,
+    bad: Option<BadParticle>,
+}
+
+impl G2pSummary {
+    fn merge(self, other: Self) -> Self {
+        let bad = match (self.bad, other.bad) {
+            (Some(a), Some(b)) => Some(if a.index <= b.index { a } else { b }),
+            (a, b) => a.or(b),
+        };
+        G2pSummary {
+            max_speed_sq: self.max_speed_sq.max(other.max_speed_sq),
+            bad,
+        }
+    }
+}
+
+/// The explicit MLS-MPM solver.
+pub struct Solver {
+    pub settings: SolverSettings,
+    pub materials: Vec<SolverMaterial>,
+    pub particles: Particles,
+    grid: SparseGrid,
+    /// Grid node index on or beyond the max wall, per axis (the min wall is node 0).
+    wall_max_node: [i32; 3],
+    arena_slots: [ArenaSlot; ARENA_NODES],
+    /// Block key of each particle, in particle order.
+    keys: Vec<u32>,
+    /// Scratch permutation for sorting.
+    order: Vec<u32>,
+    /// Largest particle speed after the last substep (m/s).
+    max_speed_m_s: f32,
+    /// Simulated time (s).
+    pub time_s: f64,
+    /// Substeps taken.
+    pub steps: u64,
+    pub stage_times: StageTimes,
+}
+
+impl Solver {
+    pub fn new(settings: SolverSettings, materials: Vec<SolverMaterial>) -> Self {
+        let grid = SparseGrid::new(settings.dx, settings.domain_min, settings.domain_max);
+        let extent = settings.domain_max - settings.domain_min;
+        // Tolerate round-off when the extent is a whole number of cells.
+        let wall_max_node = [0, 1, 2].map(|a| (extent[a] / settings.dx - 1e-3).ceil() as i32);
+        Solver {
+            settings,
+            materials,
+            particles: Particles::default(),
+            grid,
+            wall_max_node,
+            arena_slots: arena_slots(),
+            keys: Vec::new(),
+            order: Vec::new(),
+            max_speed_m_s: 0.0,
+            time_s: 0.0,
+            steps: 0,
+            stage_times: StageTimes::default(),
+        }
+    }
+
+    /// Adds particles (undeformed, stress free).
+    pub fn add_particles(&mut self, new: impl IntoIterator<Item = NewParticle>) {
+        for p in new {
+            self.max_speed_m_s = self.max_speed_m_s.max(p.velocity.norm());
+            self.particles.push(p);
+        }
+    }
+
+    /// The sparse grid (valid after a substep).
+    pub fn grid(&self) -> &SparseGrid {
+        &self.grid
+    }
+
+    /// Time step the next substep will take (s).
+    pub fn next_dt(&self) -> f32 {
+        match self.settings.time_step {
+            TimeStep::Fixed { dt_s } => dt_s,
+            TimeStep::Adaptive { cfl, max_dt_s } => {
+                let c = self
+                    .materials
+                    .iter()
+                    .map(|m| m.wave_speed_m_s())
+                    .fold(0.0, f32::max);
+                (cfl * self.settings.dx / (c + self.max_speed_m_s)).min(max_dt_s)
+            }
+        }
+    }
+
+    /// One explicit MLS-MPM substep (physics.md section 1). Returns the dt taken (s).
+    pub fn substep(&mut self) -> Result<f32, SimError> {
+        let dt = self.next_dt();
+        let t = Instant::now();
+        self.sort_particles_by_block();
+        self.stage_times.sort += t.elapsed();
+
+        let t = Instant::now();
+        self.grid.rebuild(&self.keys);
+        self.stage_times.grid_alloc += t.elapsed();
+
+        let t = Instant::now();
+        self.particle_to_grid(dt);
+        self.stage_times.p2g += t.elapsed();
+
+        let t = Instant::now();
+        self.update_grid(dt);
+        self.stage_times.grid_update += t.elapsed();
+
+        let t = Instant::now();
+        let result = self.grid_to_particle(dt);
+        self.stage_times.g2p += t.elapsed();
+
+        self.time_s += dt as f64;
+        self.steps += 1;
+        result.map(|()| dt)
+    }
+
+    /// Substeps until the simulated time reaches `time_s`; the last step is shortened to land on
+    /// it. Returns the number of substeps taken.
+    pub fn advance_to(&mut self, time_s: f64) -> Result<u64, SimError> {
+        let mut n = 0;
+        while self.time_s < time_s - 1e-12 {
+            let remaining = (time_s - self.time_s) as f32;
+            if let TimeStep::Adaptive { cfl, max_dt_s } = self.settings.time_step {
+                if self.next_dt() > remaining {
+                    let saved = self.settings.time_step;
+                    self.settings.time_step = TimeStep::Adaptive {
+                        cfl,
+                        max_dt_s: remaining.min(max_dt_s),
+                    };
+                    let r = self.substep();
+                    self.settings.time_step = saved;
+                    r?;
+                    n += 1;
+                    continue;
+                }
+            }
+            self.substep()?;
+            n += 1;
+        }
+        Ok(n)
+    }
+
+    /// Bytes held by particles, grid and solver scratch.
+    pub fn memory_bytes(&self) -> usize {
+        self.particles.memory_bytes()
+            + self.grid.memory_bytes()
+            + (self.keys.capacity() + self.order.capacity()) * std::mem::size_of::<u32>()
+    }
+
+    /// Keeps particles sorted by the block of their stencil base node (stable, so the order is
+    /// a pure function of the state: runs are deterministic for any thread count).
+    fn sort_particles_by_block(&mut self) {
+        let grid = &self.grid;
+        self.keys.clear();
+        self.keys.par_extend(
+            self.particles
+                .position
+                .par_iter()
+                .map(|x| grid.block_key(x)),
+        );
+        if self.keys.par_windows(2).all(|w| w[0] <= w[1]) {
+            return;
+        }
+        self.order.clear();
+        self.order.extend(0..self.particles.len() as u32);
+        let keys = &self.keys;
+        self.order.par_sort_by_key(|&i| keys[i as usize]);
+        self.particles.reorder(&self.order);
+        let sorted: Vec<u32> = self.order.par_iter().map(|&i| keys[i as usize]).collect();
+        self.keys = sorted;
+    }
+
+    /// P2G: each particle block scatters into a private 6x6x6 arena, and arenas are added to the
+    /// grid in 8 phases by block parity, so no two writers ever share a node (no atomics, no
+    /// locks).
+    fn particle_to_grid(&mut self, dt: f32) {
+        let dx = self.settings.dx;
+        // Q_p = -dt V_p (4/dx^2) tau_p + m_p C_p, applied to offsets measured in cells.
+        let stress_scale = -dt * 4.0 / (dx * dx) * dx;
+        let particles = &self.particles;
+        let grid_blocks = SharedBlocks::new(&mut self.grid.blocks);
+        let slots = &self.arena_slots;
+        for phase in 0..8 {
+            self.grid
+                .particle_blocks
+                .par_iter()
+                .filter(|pb| pb.phase() == phase)
+                .for_each(|pb| {
+                    let mut arena = [[0.0f32; 4]; ARENA_NODES];
+                    for p in pb.start..pb.end {
+                        let s = Stencil::new(self.grid.to_grid(&particles.position[p]));
+                        let m = particles.mass[p];
+                        let momentum = particles.velocity[p] * m;
+                        let q_cells = particles.stress[p] * (stress_scale * particles.volume[p])
+                            + particles.affine[p] * (m * dx);
+                        scatter(&mut arena, &s, local_base(&s, pb), m, momentum, &q_cells);
+                    }
+                    for (a, slot) in slots.iter().enumerate() {
+                        // SAFETY: blocks of one phase have disjoint arenas (see
+                        // `ParticleBlock::phase`), so this block is written by no other task.
+                        let block =
+                            unsafe { grid_blocks.get_mut(pb.arena_blocks[slot.block as usize]) };
+                        let node = &mut block[slot.node as usize];
+                        for c in 0..4 {
+                            node[c] += arena[a][c];
+                        }
+                    }
+                });
+        }
+    }
+
+    /// Grid update: velocity from momentum, gravity, then the walls.
+    fn update_grid(&mut self, dt: f32) {
+        let gravity = self.settings.gravity * dt;
+        let walls = self.settings.walls;
+        let wall_max_node = self.wall_max_node;
+        let coords = &self.grid.coords;
+        self.grid
+            .blocks
+            .par_iter_mut()
+            .zip(coords.par_iter())
+            .for_each(|(block, coord)| {
+                let first = coord.map(|c| c * BLOCK_EDGE);
+                let near_wall =
+                    (0..3).any(|a| first[a] <= 0 || first[a] + BLOCK_EDGE - 1 >= wall_max_node[a]);
+                for (n, node) in block.iter_mut().enumerate() {
+                    let mass = node[3];
+                    if mass <= 0.0 {
+                        continue;
+                    }
+                    let mut v = Vector3::new(node[0], node[1], node[2]) / mass + gravity;
+                    if near_wall {
+                        let local = [n / 16, (n / 4) % 4, n % 4];
+                        let index = [0, 1, 2].map(|a| first[a] + local[a] as i32);
+                        v = walls.apply_at_node(v, index, wall_max_node);
+                    }
+                    node[0] = v.x;
+                    node[1] = v.y;
+                    node[2] = v.z;
+                }
+            });
+    }
+
+    /// G2P: gathers velocity and the affine matrix, updates F, advects, keeps particles in the
+    /// domain, applies the constitutive update and checks every particle for blow-up.
+    fn grid_to_particle(&mut self, dt: f32) -> Result<(), SimError> {
+        let dx = self.settings.dx;
+        let (lo, hi) = (self.settings.domain_min, self.settings.domain_max);
+        let blowup_sq = self.settings.blowup_speed_m_s * self.settings.blowup_speed_m_s;
+        let grid = &self.grid;
+        let slots = &self.arena_slots;
+        let materials = &self.materials;
+        let blocks = &grid.particle_blocks;
+        let views = G2pView::split(&mut self.particles, blocks);
+        let summary = views
+            .into_par_iter()
+            .zip(blocks.par_iter())
+            .map(|(view, pb)| {
+                let mut arena = [Vector3::<f32>::zeros(); ARENA_NODES];
+                for (a, slot) in slots.iter().enumerate() {
+                    let n = &grid.blocks[pb.arena_blocks[slot.block as usize] as usize]
+                        [slot.node as usize];
+                    arena[a] = Vector3::new(n[0], n[1], n[2]);
+                }
+                let mut summary = G2pSummary::default();
+                // Four particles at a time: their constitutive updates share one 4-lane SVD.
+                for chunk in (0..view.position.len()).step_by(LANES) {
+                    let lanes = (view.position.len() - chunk).min(LANES);
+                    // Unused lanes carry an undeformed F: harmless for every model.
+                    let mut f = [Matrix3::identity(); LANES];
+                    let mut vc = [0.0f32; LANES];
+                    for lane in 0..lanes {
+                        let i = chunk + lane;
+                        let x = view.position[i];
+                        let s = Stencil::new(grid.to_grid(&x));
+                        let (v, b) = gather(&arena, &s, local_base(&s, pb));
+                        // C_p = (4/dx^2) sum w v_i (x_i - x_p)^T, with offsets in cells.
+                        let c = b * (4.0 / dx);
+                        f[lane] = (Matrix3::identity() + c * dt) * view.deformation[i];
+                        vc[lane] = view.volume_correction[i];
+                        view.position[i] = (x + v * dt).sup(&lo).inf(&hi);
+                        view.velocity[i] = v;
+                        view.affine[i] = c;
+                    }
+                    let material = view.material[chunk];
+                    let tau = if view.material[chunk..chunk + lanes]
+                        .iter()
+                        .all(|&m| m == material)
+                    {
+                        materials[material as usize]
+                            .model
+                            .update_x4(&mut f, &mut vc)
+                    } else {
+                        std::array::from_fn(|lane| {
+                            let m = view.material.get(chunk + lane).copied().unwrap_or(material);
+                            materials[m as usize]
+                                .model
+                                .update(&mut f[lane], &mut vc[lane])
+                        })
+                    };
+                    for lane in 0..lanes {
+                        let i = chunk + lane;
+                        view.deformation[i] = f[lane];
+                        view.volume_correction[i] = vc[lane];
+                        view.stress[i] = tau[lane];
+                        let (x, v) = (view.position[i], view.velocity[i]);
+                        let speed_sq = v.norm_squared();
+                        summary.max_speed_sq = summary.max_speed_sq.max(speed_sq);
+                        if summary.bad.is_none() {
+                            let finite =
+                                (x.sum() + speed_sq + tau[lane].sum() + f[lane].sum()).is_finite();
+                            let what = if !finite {
+                                Some("has a non-finite state".to_string())
+                            } else if speed_sq > blowup_sq {
+                                Some(format!("moves at {:.3e} m/s", speed_sq.sqrt()))
+                            } else {
+                                None
+                            };
+                            summary.bad = what.map(|what| BadParticle {
+                                index: pb.start + i,
+                                what,
+                            });
+                        }
+                    }
+                }
+                summary
+            })
+            .reduce(G2pSummary::default, G2pSummary::merge);
+        self.max_speed_m_s = summary.max_speed_sq.sqrt();
+        match summary.bad {
+            None => Ok(()),
+            Some(bad) => Err(SimError::BlowUp {
+                step: self.steps,
+                time_s: self.time_s,
+                dt_s: dt,
+                particle: self.particles.id[bad.index],
+                what: bad.what,
+                position: self.particles.position[bad.index].into(),
+                velocity: self.particles.velocity[bad.index].into(),
+            }),
+        }
+    }
+}
+
+/// Offset of a particle's stencil base node inside its block's arena (each in `0..4`).
+#[inline(always)]
+fn local_base(s: &Stencil, pb: &ParticleBlock) -> [usize; 3] {
+    [0, 1, 2].map(|a| (s.base[a] - pb.coord[a] * BLOCK_EDGE) as usize)
+}
+
+/// Adds one particle's mass and momentum `w_ip (m_p v_p + Q_p (x_i - x_p))` to its 27 arena
+/// nodes; `q_cells` is Q_p scaled for offsets in cells. With `x_i - x_p = (i, j, k) - fx` (cells)
+/// the affine term is built up one axis at a time: three vector adds per node.
+#[inline(always)]
+fn scatter(
+    arena: &mut [[f32; 4]; ARENA_NODES],
+    s: &Stencil,
+    base: [usize; 3],
+    mass: f32,
+    momentum: Vector3<f32>,
+    q_cells: &Matrix3<f32>,
+) {
+    let (qx, qy, qz) = (q_cells.column(0), q_cells.column(1), q_cells.column(2));
+    let at_base = momentum - q_cells * s.fx;
+    for i in 0..3 {
+        let p_i = at_base + qx * i as f32;
+        for j in 0..3 {
+            let p_ij = p_i + qy * j as f32;
+            let w_ij = s.weights[0][i] * s.weights[1][j];
+            let row = node_in_arena(base[0] + i, base[1] + j, base[2]);
+            for k in 0..3 {
+                let w = w_ij * s.weights[2][k];
+                let p = (p_ij + qz * k as f32) * w;
+                let node = &mut arena[row + k];
+                node[0] += p.x;
+                node[1] += p.y;
+                node[2] += p.z;
+                node[3] += w * mass;
+            }
+        }
+    }
+}
+
+/// Gathers `(sum w_i v_i, sum w_i v_i d_i^T)` over the 27 stencil nodes, `d_i` in cells. The
+/// outer product is summed per axis: `sum w v (i, j, k)^T - (sum w v) fx^T`.
+#[inline(always)]
+fn gather(
+    arena: &[Vector3<f32>; ARENA_NODES],
+    s: &Stencil,
+    base: [usize; 3],
+) -> (Vector3<f32>, Matrix3<f32>) {
+    let mut v = Vector3::zeros();
+    let (mut by_i, mut by_j, mut by_k) = (Vector3::zeros(), Vector3::zeros(), Vector3::zeros());
+    for i in 0..3 {
+        let mut v_i = Vector3::zeros();
+        for j in 0..3 {
+            let w_ij = s.weights[0][i] * s.weights[1][j];
+            let row = node_in_arena(base[0] + i, base[1] + j, base[2]);
+            let mut v_ij = Vector3::zeros();
+            for k in 0..3 {
+                let wv = arena[row + k] * (w_ij * s.weights[2][k]);
+                v_ij += wv;
+                by_k += wv * k as f32;
+            }
+            v_i += v_ij;
+            by_j += v_ij * j as f32;
+        }
+        v += v_i;
+        by_i += v_i * i as f32;
+    }
+    let b = Matrix3::from_columns(&[by_i, by_j, by_k]) - v * s.fx.transpose();
+    (v, b)
+}
+
+/// Mutable views of the particle arrays G2P writes, for one particle block.
+struct G2pView<'a> {
+    position: &'a mut [Vector3<f32>],
+    velocity: &'a mut [Vector3<f32>],
+    affine: &'a mut [Matrix3<f32>],
+    deformation: &'a mut [Matrix3<f32>],
+    stress: &'a mut [Matrix3<f32>],
+    volume_correction: &'a mut [f32],
+    material: &'a [MaterialId],
+}
+
+impl<'a> G2pView<'a> {
+    fn split(p: &'a mut Particles, blocks: &[ParticleBlock]) -> Vec<G2pView<'a>> {
+        let mut position = split_runs(&mut p.position, blocks).into_iter();
+        let mut velocity = split_runs(&mut p.velocity, blocks).into_iter();
+        let mut affine = split_runs(&mut p.affine, blocks).into_iter();
+        let mut deformation = split_runs(&mut p.deformation, blocks).into_iter();
+        let mut stress = split_runs(&mut p.stress, blocks).into_iter();
+        let mut volume_correction = split_runs(&mut p.volume_correction, blocks).into_iter();
+        let material = &p.material[..];
+        (0..blocks.len())
+            .map(|b| G2pView {
+                position: position.next().unwrap(),
+                velocity: velocity.next().unwrap(),
+                affine: affine.next().unwrap(),
+                deformation: deformation.next().unwrap(),
+                stress: stress.next().unwrap(),
+                volume_correction: volume_correction.next().unwrap(),
+                material: &material[blocks[b].start..blocks[b].end],
+            })
+            .collect()
+    }
+}
+
+/// Splits `data` into the consecutive particle runs of `blocks`.
+fn split_runs<'a, T>(mut data: &'a mut [T], blocks: &[ParticleBlock]) -> Vec<&'a mut [T]> {
+    blocks
+        .iter()
+        .map(|pb| {
+            let (run, rest) = std::mem::take(&mut data).split_at_mut(pb.end - pb.start);
+            data = rest;
+            run
+        })
+        .collect()
+}
+
+/// Grid blocks written from parallel P2G tasks that are known to touch disjoint blocks.
+struct SharedBlocks {
+    ptr: *mut Block,
+    len: usize,
+}
+
+// SAFETY: access goes through `get_mut`, whose callers guarantee disjointness.
+unsafe impl Sync for SharedBlocks {}
+unsafe impl Send for SharedBlocks {}
+
+impl SharedBlocks {
+    fn new(blocks: &mut [Block]) -> Self {
+        SharedBlocks {
+            ptr: blocks.as_mut_ptr(),
+            len: blocks.len(),
+        }
+    }
+
+    /// # Safety
+    /// No other reference to block `i` may exist while the returned one lives.
+    #[allow(clippy::mut_from_ref)]
+    unsafe fn get_mut(&self, i: u32) -> &mut Block {
+        assert!((i as usize) < self.len);
+        &mut *self.ptr.add(i as usize)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mpm::material::{FixedCorotated, Lame};
+    use crate::mpm::Wall;
+    use rand::{rngs::SmallRng, Rng, SeedableRng};
+
+    const DX: f32 = 0.01;
+
+    fn jelly() -> SolverMaterial {
+        SolverMaterial {
+            name: "jelly".into(),
+            density_kg_m3: 1000.0,
+            model: Constitutive::FixedCorotated(FixedCorotated {
+                lame: Lame::from_young_poisson(1e5, 0.3),
+            }),
+        }
+    }
+
+    fn settings(gravity: Vector3<f32>, walls: Walls) -> SolverSettings {
+        SolverSettings {
+            dx: DX,
+            domain_min: Vector3::zeros(),
+            domain_max: Vector3::new(0.4, 0.3, 0.3),
+            walls,
+            gravity,
+            time_step: TimeStep::Fixed { dt_s: 1e-4 },
+            blowup_speed_m_s: 100.0,
+        }
+    }
+
+    /// A blob of particles with random velocities, affine matrices and symmetric stresses.
+    fn random_solver(seed: u64, gravity: Vector3<f32>, walls: Walls) -> Solver {
+        let mut rng = SmallRng::seed_from_u64(seed);
+        let mut s = Solver::new(settings(gravity, walls), vec![jelly()]);
+        let mut r = |lo: f32, hi: f32| rng.random_range(lo..hi);
+        let new: Vec<NewParticle> = (0..3000)
+            .map(|_| NewParticle {
+                position: Vector3::new(r(0.05, 0.35), r(0.05, 0.25), r(0.05, 0.25)),
+                velocity: Vector3::new(r(-1.0, 1.0), r(-1.0, 1.0), r(-1.0, 1.0)),
+                mass: r(0.5, 1.5) * 1e-3,
+                volume: 1e-6,
+                material: 0,
+            })
+            .collect();
+        s.add_particles(new);
+        let mut rng = SmallRng::seed_from_u64(seed + 1);
+        for p in 0..s.particles.len() {
+            s.particles.affine[p] = Matrix3::from_fn(|_, _| rng.random_range(-5.0..5.0));
+            let a = Matrix3::from_fn(|_, _| rng.random_range(-1e3..1e3f32));
+            s.particles.stress[p] = a + a.transpose();
+        }
+        s
+    }
+
+    fn grid_totals(s: &Solver) -> (f64, Vector3<f64>, Vector3<f64>) {
+        let (mut m, mut p, mut l) = (0.0, Vector3::zeros(), Vector3::zeros());
+        for (block, coord) in s.grid.blocks.iter().zip(&s.grid.coords) {
+            for (n, node) in block.iter().enumerate() {
+                let idx = [n / 16, (n / 4) % 4, n % 4];
+                let x = Vector3::from_fn(|a, _| ((coord[a] * BLOCK_EDGE) as usize + idx[a]) as f64)
+                    * DX as f64
+                    + s.grid.origin.cast::<f64>();
+                let mom = Vector3::new(node[0] as f64, node[1] as f64, node[2] as f64);
+                m += node[3] as f64;
+                p += mom;
+                l += x.cross(&mom);
+            }
+        }
+        (m, p, l)
+    }
+
+    fn close(a: Vector3<f64>, b: Vector3<f64>, scale: f64) -> bool {
+        (a - b).norm() <= 1e-5 * scale
+    }
+
+    #[test]
+    fn p2g_conserves_mass_momentum_and_angular_momentum() {
+        let mut s = random_solver(1, Vector3::zeros(), Walls::all(Wall::Slip));
+        let (m0, p0, l0) = (
+            s.particles.total_mass(),
+            s.particles.total_momentum(),
+            s.particles.total_angular_momentum(DX),
+        );
+        s.sort_particles_by_block();
+        s.grid.rebuild(&s.keys);
+        // Stress enters P2G but, being symmetric and summed against zero-mean offsets, adds no
+        // net force or torque.
+        s.particle_to_grid(1e-4);
+        let (m, p, l) = grid_totals(&s);
+        let p_scale = s.particles.mass.iter().map(|&m| m as f64).sum::<f64>();
+        assert!((m - m0).abs() < 1e-6 * m0, "mass {m} vs {m0}");
+        assert!(close(p, p0, p_scale), "momentum {p:?} vs {p0:?}");
+        assert!(
+            close(l, l0, p_scale * 0.4),
+            "angular momentum {l:?} vs {l0:?}"
+        );
+    }
+
+    #[test]
+    fn g2p_gives_back_the_grid_angular_momentum() {
+        let mut s = random_solver(2, Vector3::zeros(), Walls::all(Wall::Slip));
+        for p in 0..s.particles.len() {
+            s.particles.stress[p] = Matrix3::zeros();
+        }
+        s.sort_particles_by_block();
+        s.grid.rebuild(&s.keys);
+        s.particle_to_grid(0.0);
+        s.update_grid(0.0);
+        // After the grid update the nodes hold velocities; weight them by mass.
+        let (mut p_grid, mut l_grid) = (Vector3::zeros(), Vector3::zeros());
+        for (block, coord) in s.grid.blocks.iter().zip(&s.grid.coords) {
+            for (n, node) in block.iter().enumerate() {
+                let idx = [n / 16, (n / 4) % 4, n % 4];
+                let x = Vector3::from_fn(|a, _| ((coord[a] * BLOCK_EDGE) as usize + idx[a]) as f64)
+                    * DX as f64;
+                let mom =
+                    Vector3::new(node[0] as f64, node[1] as f64, node[2] as f64) * node[3] as f64;
+                p_grid += mom;
+                l_grid += x.cross(&mom);
+            }
+        }
+        s.grid_to_particle(0.0).unwrap();
+        let scale = s.particles.total_mass();
+        assert!(close(s.particles.total_momentum(), p_grid, scale));
+        assert!(close(
+            s.particles.total_angular_momentum(DX),
+            l_grid,
+            scale * 0.4
+        ));
+    }
+
+    /// The same substep on a plain dense grid, written as simply as possible.
+    fn dense_reference_step(s: &mut Solver, dt: f32) {
+        // Nodes -1 ..= extent/dx + 1 per axis, stored with an offset of 1.
+        let n = [44usize, 34, 34];
+        let at = |i: [i32; 3]| -> usize {
+            let u = i.map(|v| (v + 1) as usize);
+            (u[0] * n[1] + u[1]) * n[2] + u[2]
+        };
+        let mut grid = vec![[0.0f32; 4]; n[0] * n[1] * n[2]];
+        let p = &s.particles;
+        for q in 0..p.len() {
+            let st = Stencil::new(p.position[q] / DX);
+            let m = p.mass[q];
+            let qm = p.stress[q] * (-dt * 4.0 / DX * p.volume[q]) + p.affine[q] * (m * DX);
+            for (i, j, k) in stencil_nodes() {
+                let w = st.weight(i, j, k);
+                let mom = (p.velocity[q] * m + qm * st.offset_cells(i, j, k)) * w;
+                let g = &mut grid[at([
+                    st.base[0] + i as i32,
+                    st.base[1] + j as i32,
+                    st.base[2] + k as i32,
+                ])];
+                g[0] += mom.x;
+                g[1] += mom.y;
+                g[2] += mom.z;
+                g[3] += w * m;
+            }
+        }
+        let wall_max = s.wall_max_node;
+        for x in -1..(n[0] as i32 - 1) {
+            for y in -1..(n[1] as i32 - 1) {
+                for z in -1..(n[2] as i32 - 1) {
+                    let g = &mut grid[at([x, y, z])];
+                    if g[3] <= 0.0 {
+                        continue;
+                    }
+                    let v = Vector3::new(g[0], g[1], g[2]) / g[3] + s.settings.gravity * dt;
+                    let v = s.settings.walls.apply_at_node(v, [x, y, z], wall_max);
+                    g[0] = v.x;
+                    g[1] = v.y;
+                    g[2] = v.z;
+                }
+            }
+        }
+        let (lo, hi) = (s.settings.domain_min, s.settings.domain_max);
+        let p = &mut s.particles;
+        for q in 0..p.len() {
+            let st = Stencil::new(p.position[q] / DX);
+            let (mut v, mut b) = (Vector3::zeros(), Matrix3::zeros());
+            for (i, j, k) in stencil_nodes() {
+                let g = grid[at([
+                    st.base[0] + i as i32,
+                    st.base[1] + j as i32,
+                    st.base[2] + k as i32,
+                ])];
+                let vi = Vector3::new(g[0], g[1], g[2]) * st.weight(i, j, k);
+                v += vi;
+                b += vi * st.offset_cells(i, j, k).transpose();
+            }
+            let c = b * (4.0 / DX);
+            p.deformation[q] = (Matrix3::identity() + c * dt) * p.deformation[q];
+            p.position[q] = (p.position[q] + v * dt).sup(&lo).inf(&hi);
+            p.velocity[q] = v;
+            p.affine[q] = c;
+            let mut vc = p.volume_correction[q];
+            p.stress[q] = s.materials[0].model.update(&mut p.deformation[q], &mut vc);
+            p.volume_correction[q] = vc;
+        }
+    }
+
+    fn stencil_nodes() -> impl Iterator<Item = (usize, usize, usize)> {
+        (0..3).flat_map(|i| (0..3).flat_map(move |j| (0..3).map(move |k| (i, j, k))))
+    }
+
+    #[test]
+    fn sparse_grid_matches_a_dense_reference_grid() {
+        let walls = Walls {
+            z_min: Wall::Sticky,
+            x_max: Wall::Friction(0.5),
+            ..Walls::all(Wall::Slip)
+        };
+        let gravity = Vector3::new(0.0, 0.0, -9.81);
+        let mut sparse = random_solver(3, gravity, walls);
+        // Push some particles against the walls so the boundary code runs.
+        for p in 0..300 {
+            sparse.particles.position[p].z = 0.001 * (p % 7) as f32;
+            sparse.particles.position[p].x = 0.4 - 0.001 * (p % 5) as f32;
+        }
+        let mut dense = Solver::new(sparse.settings.clone(), sparse.materials.clone());
+        dense.particles = sparse.particles.clone();
+        dense.wall_max_node = sparse.wall_max_node;
+        for _ in 0..5 {
+            sparse.substep().unwrap();
+            dense_reference_step(&mut dense, 1e-4);
+        }
+        let mut by_id = vec![0usize; sparse.particles.len()];
+        for (q, &id) in sparse.particles.id.iter().enumerate() {
+            by_id[id as usize] = q;
+        }
+        let (mut dx_max, mut dv_max) = (0.0f32, 0.0f32);
+        for q in 0..dense.particles.len() {
+            let r = by_id[dense.particles.id[q] as usize];
+            dx_max =
+                dx_max.max((sparse.particles.position[r] - dense.particles.position[q]).norm());
+            dv_max =
+                dv_max.max((sparse.particles.velocity[r] - dense.particles.velocity[q]).norm());
+        }
+        assert!(dx_max < 1e-6, "positions differ by {dx_max} m");
+        assert!(dv_max < 1e-3, "velocities differ by {dv_max} m/s");
+    }
+}

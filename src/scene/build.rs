@@ -1,0 +1,351 @@
+//! From a checked scene to a solver filled with particles.
+
+use nalgebra::Vector3;
+
+use super::config::{BodyConfig, BoxShape, MaterialConfig, SandConfig};
+use super::{Scene, SceneError};
+use crate::mpm::material::{Constitutive, DruckerPrager, FixedCorotated, Lame};
+use crate::mpm::{NewParticle, Solver, SolverMaterial, SolverSettings, TimeStep, Walls};
+
+/// Checks ranges and references; errors name the file and the field.
+pub fn validate(scene: &Scene) -> Result<(), SceneError> {
+    let c = &scene.config;
+    let positive = |field: &str, v: f64| {
+        if v > 0.0 && v.is_finite() {
+            Ok(())
+        } else {
+            Err(scene.invalid(field, format!("{v} must be a finite number > 0")))
+        }
+    };
+    positive("duration_s", c.duration_s)?;
+    positive("output.frame_interval_s", c.output.frame_interval_s)?;
+    if c.gravity_m_s2.iter().any(|g| !g.is_finite()) {
+        return Err(scene.invalid("gravity_m_s2", "must be finite"));
+    }
+    if let Some(robot) = &c.robot {
+        robot.validate(&scene.file)?;
+        if c.sand.is_some() {
+            return Err(scene.invalid(
+                "robot",
+                "a robot on sand needs the sand-robot coupling, which is not built yet",
+            ));
+        }
+    }
+    let Some(sand) = scene.sand() else {
+        return if c.column_collapse.is_some() {
+            Err(scene.invalid(
+                "column_collapse",
+                "needs a `sand` section (domain, materials)",
+            ))
+        } else {
+            Ok(())
+        };
+    };
+    positive("sand.dx_m", sand.dx_m as f64)?;
+    for axis in 0..3 {
+        let (lo, hi) = (sand.domain.min_m[axis], sand.domain.max_m[axis]);
+        if !(hi - lo >= 2.0 * sand.dx_m) {
+            return Err(scene.invalid(
+                "sand.domain.max_m",
+                format!("axis {axis}: max {hi} must exceed min {lo} by at least 2 dx"),
+            ));
+        }
+    }
+    for (name, wall) in sand.domain.walls.named() {
+        if let crate::mpm::Wall::Friction(mu) = wall {
+            if !(mu >= 0.0 && mu.is_finite()) {
+                return Err(scene.invalid(
+                    format!("sand.domain.walls.{name}.friction"),
+                    format!("{mu} must be a finite coefficient >= 0"),
+                ));
+            }
+        }
+    }
+    let s = &sand.solver;
+    if !(s.cfl > 0.0 && s.cfl <= 1.0) {
+        return Err(scene.invalid("sand.solver.cfl", format!("{} must be in (0, 1]", s.cfl)));
+    }
+    positive("sand.solver.max_dt_s", s.max_dt_s as f64)?;
+    positive("sand.solver.blowup_speed_m_s", s.blowup_speed_m_s as f64)?;
+    if let Some(dt) = s.fixed_dt_s {
+        positive("sand.solver.fixed_dt_s", dt as f64)?;
+    }
+    for (name, m) in &sand.materials {
+        let field = |f: &str| format!("sand.materials.{name}.{f}");
+        let (density, e, nu) = match m {
+            MaterialConfig::DruckerPrager {
+                density_kg_m3,
+                youngs_modulus_pa,
+                poisson_ratio,
+                friction_angle_deg,
+                ..
+            } => {
+                if !(*friction_angle_deg > 0.0 && *friction_angle_deg < 90.0) {
+                    return Err(scene.invalid(
+                        field("friction_angle_deg"),
+                        format!("{friction_angle_deg} must be in (0, 90) degrees"),
+                    ));
+                }
+                (density_kg_m3, youngs_modulus_pa, poisson_ratio)
+            }
+            MaterialConfig::FixedCorotated {
+                density_kg_m3,
+                youngs_modulus_pa,
+                poisson_ratio,
+            } => (density_kg_m3, youngs_modulus_pa, poisson_ratio),
+        };
+        positive(&field("density_kg_m3"), *density as f64)?;
+        positive(&field("youngs_modulus_pa"), *e as f64)?;
+        if !(*nu > -1.0 && *nu < 0.5) {
+            return Err(scene.invalid(field("poisson_ratio"), format!("{nu} must be in (-1, 0.5)")));
+        }
+    }
+    for (i, body) in scene.bodies().iter().enumerate() {
+        let field = |f: &str| {
+            if i < sand.bodies.len() {
+                format!("sand.bodies[{i}].{f}")
+            } else {
+                format!("column_collapse.{f}")
+            }
+        };
+        validate_body(scene, sand, body, &field)?;
+    }
+    if let Some(cc) = &c.column_collapse {
+        positive(
+            "column_collapse.initial_length_m",
+            cc.initial_length_m as f64,
+        )?;
+        positive("column_collapse.aspect_ratio", cc.aspect_ratio as f64)?;
+    }
+    Ok(())
+}
+
+fn validate_body(
+    scene: &Scene,
+    sand: &SandConfig,
+    body: &BodyConfig,
+    field: &dyn Fn(&str) -> String,
+) -> Result<(), SceneError> {
+    if !sand.materials.contains_key(&body.material) {
+        let known: Vec<&String> = sand.materials.keys().collect();
+        return Err(scene.invalid(
+            field("material"),
+            format!(
+                "unknown material `{}` (materials: {known:?})",
+                body.material
+            ),
+        ));
+    }
+    if lattice_side(body.particles_per_cell).is_none() {
+        return Err(scene.invalid(
+            field("particles_per_cell"),
+            format!(
+                "{} must be a cube number: 1, 8, 27 or 64",
+                body.particles_per_cell
+            ),
+        ));
+    }
+    let (lo, hi) = match (&body.box_shape, &body.cylinder) {
+        (Some(b), None) => (Vector3::from(b.min_m), Vector3::from(b.max_m)),
+        (None, Some(c)) => {
+            if !(c.radius_m > 0.0 && c.height_m > 0.0) {
+                return Err(scene.invalid(field("cylinder"), "radius_m and height_m must be > 0"));
+            }
+            let a = c.axis.index();
+            let mut lo = Vector3::from(c.base_centre_m).add_scalar(-c.radius_m);
+            let mut hi = Vector3::from(c.base_centre_m).add_scalar(c.radius_m);
+            lo[a] = c.base_centre_m[a];
+            hi[a] = c.base_centre_m[a] + c.height_m;
+            (lo, hi)
+        }
+        _ => return Err(scene.invalid(field("box"), "give exactly one of `box` and `cylinder`")),
+    };
+    let (dmin, dmax) = (
+        Vector3::from(sand.domain.min_m),
+        Vector3::from(sand.domain.max_m),
+    );
+    for axis in 0..3 {
+        if !(lo[axis] < hi[axis]) {
+            return Err(scene.invalid(field("box"), format!("empty along axis {axis}")));
+        }
+        if lo[axis] < dmin[axis] - 1e-6 || hi[axis] > dmax[axis] + 1e-6 {
+            return Err(scene.invalid(
+                field(if body.box_shape.is_some() {
+                    "box"
+                } else {
+                    "cylinder"
+                }),
+                format!(
+                    "extends outside the domain along axis {axis}: [{}, {}] not within [{}, {}] m",
+                    lo[axis], hi[axis], dmin[axis], dmax[axis]
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Particles per cell edge for a cube number of particles per cell.
+fn lattice_side(particles_per_cell: u32) -> Option<u32> {
+    (1..=4).find(|n| n * n * n == particles_per_cell)
+}
+
+impl Scene {
+    /// The `sand` section, if any.
+    pub fn sand(&self) -> Option<&SandConfig> {
+        self.config.sand.as_ref()
+    }
+
+    /// The scene's sand bodies: those listed under `sand.bodies`, then the column of a
+    /// `column_collapse` scene.
+    pub fn bodies(&self) -> Vec<BodyConfig> {
+        let Some(sand) = self.sand() else {
+            return Vec::new();
+        };
+        let mut bodies = sand.bodies.clone();
+        if let Some(cc) = &self.config.column_collapse {
+            let min = sand.domain.min_m;
+            let max = sand.domain.max_m;
+            bodies.push(BodyConfig {
+                material: cc.material.clone(),
+                box_shape: Some(BoxShape {
+                    min_m: min,
+                    max_m: [
+                        min[0] + cc.initial_length_m,
+                        max[1],
+                        min[2] + cc.aspect_ratio * cc.initial_length_m,
+                    ],
+                }),
+                cylinder: None,
+                particles_per_cell: cc.particles_per_cell,
+                velocity_m_s: [0.0; 3],
+            });
+        }
+        bodies
+    }
+
+    /// The MPM solver of the scene's sand, filled with its bodies' particles.
+    pub fn build_solver(&self) -> Option<Solver> {
+        let sand = self.sand()?;
+        let names: Vec<&String> = sand.materials.keys().collect();
+        let materials = sand
+            .materials
+            .iter()
+            .map(|(name, m)| SolverMaterial {
+                name: name.clone(),
+                density_kg_m3: m.density_kg_m3(),
+                model: constitutive(m),
+            })
+            .collect();
+        let s = &sand.solver;
+        let settings = SolverSettings {
+            dx: sand.dx_m,
+            domain_min: sand.domain.min_m.into(),
+            domain_max: sand.domain.max_m.into(),
+            walls: {
+                let w = sand.domain.walls;
+                Walls {
+                    x_min: w.x_min.0,
+                    x_max: w.x_max.0,
+                    y_min: w.y_min.0,
+                    y_max: w.y_max.0,
+                    z_min: w.z_min.0,
+                    z_max: w.z_max.0,
+                }
+            },
+            gravity: self.config.gravity_m_s2.into(),
+            time_step: match s.fixed_dt_s {
+                Some(dt_s) => TimeStep::Fixed { dt_s },
+                None => TimeStep::Adaptive {
+                    cfl: s.cfl,
+                    max_dt_s: s.max_dt_s,
+                },
+            },
+            blowup_speed_m_s: s.blowup_speed_m_s,
+        };
+        let mut solver = Solver::new(settings, materials);
+        for body in self.bodies() {
+            let material = names.iter().position(|n| **n == body.material).unwrap() as u16;
+            let density = sand.materials[&body.material].density_kg_m3();
+            solver.add_particles(fill_body(&body, sand.dx_m, density, material));
+        }
+        Some(solver)
+    }
+}
+
+fn constitutive(m: &MaterialConfig) -> Constitutive {
+    match *m {
+        MaterialConfig::DruckerPrager {
+            youngs_modulus_pa,
+            poisson_ratio,
+            friction_angle_deg,
+            volume_correction,
+            ..
+        } => Constitutive::DruckerPrager(DruckerPrager::new(
+            Lame::from_young_poisson(youngs_modulus_pa, poisson_ratio),
+            friction_angle_deg.to_radians(),
+            volume_correction,
+        )),
+        MaterialConfig::FixedCorotated {
+            youngs_modulus_pa,
+            poisson_ratio,
+            ..
+        } => Constitutive::FixedCorotated(FixedCorotated {
+            lame: Lame::from_young_poisson(youngs_modulus_pa, poisson_ratio),
+        }),
+    }
+}
+
+/// Particles on a regular lattice of `n^3` per cell (aligned with the grid), inside the body.
+pub fn fill_body(body: &BodyConfig, dx: f32, density: f32, material: u16) -> Vec<NewParticle> {
+    let side = lattice_side(body.particles_per_cell).expect("validated") as f32;
+    let spacing = dx / side;
+    let volume = spacing * spacing * spacing;
+    let (lo, hi, inside): (
+        Vector3<f32>,
+        Vector3<f32>,
+        Box<dyn Fn(&Vector3<f32>) -> bool>,
+    ) = match (&body.box_shape, &body.cylinder) {
+        (Some(b), _) => (
+            b.min_m.into(),
+            b.max_m.into(),
+            Box::new(|_: &Vector3<f32>| true),
+        ),
+        (None, Some(c)) => {
+            let a = c.axis.index();
+            let centre = Vector3::from(c.base_centre_m);
+            let (r, h) = (c.radius_m, c.height_m);
+            let mut lo = centre.add_scalar(-r);
+            let mut hi = centre.add_scalar(r);
+            lo[a] = centre[a];
+            hi[a] = centre[a] + h;
+            let inside = move |x: &Vector3<f32>| {
+                let mut d = x - centre;
+                d[a] = 0.0;
+                d.norm_squared() <= r * r
+            };
+            (lo, hi, Box::new(inside))
+        }
+        (None, None) => unreachable!("validated"),
+    };
+    // Lattice points at (i + 1/2) spacing from the box corner.
+    let counts = (hi - lo).map(|e| (e / spacing).round().max(1.0) as usize);
+    let mut out = Vec::with_capacity(counts.x * counts.y * counts.z);
+    for i in 0..counts.x {
+        for j in 0..counts.y {
+            for k in 0..counts.z {
+                let x = lo + Vector3::new(i as f32 + 0.5, j as f32 + 0.5, k as f32 + 0.5) * spacing;
+                if inside(&x) {
+                    out.push(NewParticle {
+                        position: x,
+                        velocity: body.velocity_m_s.into(),
+                        mass: density * volume,
+                        volume,
+                        material,
+                    });
+                }
+            }
+        }
+    }
+    out
+}

@@ -1,0 +1,329 @@
+//! The scene file format: YAML mapped onto these structs. Every field documents its unit and
+//! default; unknown keys are errors. `docs/scenes.md` describes the format for users.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Deserializer};
+
+use crate::mpm::Wall;
+
+/// A whole scene file.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneConfig {
+    /// Scene name, used to name outputs.
+    pub name: String,
+    /// Simulated time to run (s).
+    pub duration_s: f64,
+    /// Gravitational acceleration (m/s^2). Default `[0, 0, -9.81]` (REP-103: z up).
+    #[serde(default = "default_gravity")]
+    pub gravity_m_s2: [f32; 3],
+    /// The MPM sand simulation, if the scene has sand.
+    pub sand: Option<SandConfig>,
+    /// A granular column collapse: adds the column body to `sand` and measures the runout.
+    pub column_collapse: Option<ColumnCollapseConfig>,
+    /// The hexapod (rigid bodies in rapier); on rigid ground when the scene has no sand.
+    pub robot: Option<crate::robot::RobotConfig>,
+    /// What the run writes besides its summary.
+    #[serde(default)]
+    pub output: OutputConfig,
+}
+
+fn default_gravity() -> [f32; 3] {
+    [0.0, 0.0, -9.81]
+}
+
+/// The sand: domain, grid, solver settings, materials and bodies.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SandConfig {
+    pub domain: DomainConfig,
+    /// Grid node spacing (m). Required; must be > 0.
+    pub dx_m: f32,
+    #[serde(default)]
+    pub solver: SolverConfig,
+    /// Materials by name.
+    pub materials: BTreeMap<String, MaterialConfig>,
+    /// Sand bodies filled with particles at the start. Default: none.
+    #[serde(default)]
+    pub bodies: Vec<BodyConfig>,
+}
+
+/// The axis-aligned box particles never leave.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DomainConfig {
+    /// Min corner (m).
+    pub min_m: [f32; 3],
+    /// Max corner (m); each component greater than `min_m`'s.
+    pub max_m: [f32; 3],
+    /// Wall behaviour. Default: all six slip.
+    #[serde(default = "default_walls")]
+    pub walls: WallsConfig,
+}
+
+fn default_walls() -> WallsConfig {
+    let slip = WallConfig(Wall::Slip);
+    WallsConfig {
+        x_min: slip,
+        x_max: slip,
+        y_min: slip,
+        y_max: slip,
+        z_min: slip,
+        z_max: slip,
+    }
+}
+
+/// The six walls; each `sticky`, `slip` or `{friction: <coefficient>}`. Default: slip.
+#[derive(Clone, Copy, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WallsConfig {
+    #[serde(default = "slip")]
+    pub x_min: WallConfig,
+    #[serde(default = "slip")]
+    pub x_max: WallConfig,
+    #[serde(default = "slip")]
+    pub y_min: WallConfig,
+    #[serde(default = "slip")]
+    pub y_max: WallConfig,
+    #[serde(default = "slip")]
+    pub z_min: WallConfig,
+    #[serde(default = "slip")]
+    pub z_max: WallConfig,
+}
+
+fn slip() -> WallConfig {
+    WallConfig(Wall::Slip)
+}
+
+impl WallsConfig {
+    /// `(field name, wall)` of the six walls.
+    pub fn named(&self) -> [(&'static str, Wall); 6] {
+        [
+            ("x_min", self.x_min.0),
+            ("x_max", self.x_max.0),
+            ("y_min", self.y_min.0),
+            ("y_max", self.y_max.0),
+            ("z_min", self.z_min.0),
+            ("z_max", self.z_max.0),
+        ]
+    }
+}
+
+/// One wall as written in YAML: `sticky`, `slip`, or `{friction: 0.5}`.
+#[derive(Clone, Copy, Debug)]
+pub struct WallConfig(pub Wall);
+
+impl<'de> Deserialize<'de> for WallConfig {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(deny_unknown_fields)]
+        struct Friction {
+            friction: f32,
+        }
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum Repr {
+            Name(String),
+            Friction(Friction),
+        }
+        let expected = "expected `sticky`, `slip` or `{friction: <coefficient>}`";
+        match Repr::deserialize(d).map_err(|_| serde::de::Error::custom(expected))? {
+            Repr::Name(name) if name == "sticky" => Ok(WallConfig(Wall::Sticky)),
+            Repr::Name(name) if name == "slip" => Ok(WallConfig(Wall::Slip)),
+            Repr::Name(name) => Err(serde::de::Error::custom(format!("`{name}`: {expected}"))),
+            Repr::Friction(f) => Ok(WallConfig(Wall::Friction(f.friction))),
+        }
+    }
+}
+
+/// Time stepping and blow-up detection.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SolverConfig {
+    /// CFL number of the adaptive step `dt = cfl dx / (c + max |v|)` (dimensionless, (0, 1]).
+    /// Default 0.4.
+    #[serde(default = "default_cfl")]
+    pub cfl: f32,
+    /// Upper bound of the adaptive step (s). Default 1e-3.
+    #[serde(default = "default_max_dt")]
+    pub max_dt_s: f32,
+    /// A fixed step (s) instead of the adaptive one; it is not checked against the CFL
+    /// condition. Default: none (adaptive).
+    #[serde(default)]
+    pub fixed_dt_s: Option<f32>,
+    /// A particle faster than this (m/s) stops the run as a blow-up. Default 100.
+    #[serde(default = "default_blowup_speed")]
+    pub blowup_speed_m_s: f32,
+}
+
+fn default_cfl() -> f32 {
+    0.4
+}
+fn default_max_dt() -> f32 {
+    1e-3
+}
+fn default_blowup_speed() -> f32 {
+    100.0
+}
+
+impl Default for SolverConfig {
+    fn default() -> Self {
+        SolverConfig {
+            cfl: default_cfl(),
+            max_dt_s: default_max_dt(),
+            fixed_dt_s: None,
+            blowup_speed_m_s: default_blowup_speed(),
+        }
+    }
+}
+
+/// A material, chosen by `model`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(tag = "model", rename_all = "snake_case", deny_unknown_fields)]
+pub enum MaterialConfig {
+    /// Dry sand: Hencky St. Venant-Kirchhoff elasticity with Drucker-Prager plasticity (Klar et
+    /// al. 2016) and volume correction (Tampubolon et al. 2017).
+    DruckerPrager {
+        /// Density of the bulk material (kg/m^3), > 0.
+        density_kg_m3: f32,
+        /// Young's modulus (Pa), > 0.
+        youngs_modulus_pa: f32,
+        /// Poisson's ratio, in (-1, 0.5).
+        poisson_ratio: f32,
+        /// Internal friction angle (deg), in (0, 90).
+        friction_angle_deg: f32,
+        /// Give back volume gained by expansion on later compression. Default true.
+        #[serde(default = "yes")]
+        volume_correction: bool,
+    },
+    /// Fixed-corotated elasticity (Stomakhin et al. 2012), for elastic test bodies.
+    FixedCorotated {
+        /// Density (kg/m^3), > 0.
+        density_kg_m3: f32,
+        /// Young's modulus (Pa), > 0.
+        youngs_modulus_pa: f32,
+        /// Poisson's ratio, in (-1, 0.5).
+        poisson_ratio: f32,
+    },
+}
+
+fn yes() -> bool {
+    true
+}
+
+impl MaterialConfig {
+    pub fn density_kg_m3(&self) -> f32 {
+        match self {
+            MaterialConfig::DruckerPrager { density_kg_m3, .. }
+            | MaterialConfig::FixedCorotated { density_kg_m3, .. } => *density_kg_m3,
+        }
+    }
+}
+
+/// A body of sand filled with particles at the start; exactly one of `box` and `cylinder`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BodyConfig {
+    /// Name of a material in `materials`.
+    pub material: String,
+    /// An axis-aligned box.
+    #[serde(rename = "box")]
+    pub box_shape: Option<BoxShape>,
+    /// A cylinder.
+    pub cylinder: Option<CylinderShape>,
+    /// Particles per grid cell: a cube number (1, 8, 27, 64), placed on a regular lattice.
+    /// Default 8.
+    #[serde(default = "default_ppc")]
+    pub particles_per_cell: u32,
+    /// Initial velocity (m/s). Default `[0, 0, 0]`.
+    #[serde(default)]
+    pub velocity_m_s: [f32; 3],
+}
+
+fn default_ppc() -> u32 {
+    8
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BoxShape {
+    /// Min corner (m).
+    pub min_m: [f32; 3],
+    /// Max corner (m).
+    pub max_m: [f32; 3],
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CylinderShape {
+    /// Centre of the base disc (m).
+    pub base_centre_m: [f32; 3],
+    /// Axis: `x`, `y` or `z`. Default `z`.
+    #[serde(default = "default_axis")]
+    pub axis: Axis,
+    /// Radius (m), > 0.
+    pub radius_m: f32,
+    /// Length along the axis (m), > 0.
+    pub height_m: f32,
+}
+
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum Axis {
+    X,
+    Y,
+    Z,
+}
+
+impl Axis {
+    pub fn index(self) -> usize {
+        self as usize
+    }
+}
+
+fn default_axis() -> Axis {
+    Axis::Z
+}
+
+/// A quasi-2D granular column collapse: a box of sand against the `x_min` wall, spanning the
+/// domain's width along y, released at t = 0 (Lube et al. 2005).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ColumnCollapseConfig {
+    /// Name of a material in `sand.materials`.
+    pub material: String,
+    /// Initial length L_i along x (m), > 0.
+    pub initial_length_m: f32,
+    /// Aspect ratio a = H_i / L_i (dimensionless), > 0.
+    pub aspect_ratio: f32,
+    /// Particles per cell (cube number). Default 8.
+    #[serde(default = "default_ppc")]
+    pub particles_per_cell: u32,
+}
+
+/// Outputs of `sandstep run`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OutputConfig {
+    /// Interval between frames (s of sim time): progress, metrics samples and snapshots.
+    /// Default 0.01.
+    #[serde(default = "default_frame_interval")]
+    pub frame_interval_s: f64,
+    /// Write a PLY particle snapshot every this many frames; 0 = never. Default 0.
+    #[serde(default)]
+    pub ply_every_frames: u32,
+}
+
+fn default_frame_interval() -> f64 {
+    0.01
+}
+
+impl Default for OutputConfig {
+    fn default() -> Self {
+        OutputConfig {
+            frame_interval_s: default_frame_interval(),
+            ply_every_frames: 0,
+        }
+    }
+}

@@ -1,0 +1,136 @@
+//! Bad scene input gets a clear error naming the file and the field.
+
+use std::path::Path;
+
+use sandstep::scene::{Scene, SceneError};
+
+const SCENE: &str = include_str!("../config/column_collapse.yaml");
+
+fn error_of(text: &str, overrides: &[&str]) -> String {
+    let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
+    match Scene::from_yaml(text, Path::new("scenes/test.yaml"), &overrides) {
+        Ok(_) => panic!("scene with {overrides:?} was accepted"),
+        Err(e) => e.to_string(),
+    }
+}
+
+fn assert_names(message: &str, parts: &[&str]) {
+    for part in parts {
+        assert!(
+            message.contains(part),
+            "error `{message}` does not mention `{part}`"
+        );
+    }
+}
+
+#[test]
+fn the_shipped_scene_loads() {
+    let scene = Scene::load(Path::new("config/column_collapse.yaml"), &[]).unwrap();
+    assert!(scene.build_solver().unwrap().particles.len() > 1000);
+}
+
+#[test]
+fn unknown_key() {
+    let text = SCENE.replacen("\nsand:\n", "\nsand:\n  grid_size: 3\n", 1);
+    assert_names(
+        &error_of(&text, &[]),
+        &["scenes/test.yaml", "sand", "grid_size", "line"],
+    );
+    let e = error_of(SCENE, &["sand.materials.sand.frction_angle_deg=30"]);
+    assert_names(
+        &e,
+        &[
+            "scenes/test.yaml",
+            "sand.materials.sand",
+            "frction_angle_deg",
+        ],
+    );
+}
+
+#[test]
+fn out_of_range_values() {
+    for (set, field) in [
+        ("sand.dx_m=0", "sand.dx_m"),
+        ("sand.dx_m=-0.01", "sand.dx_m"),
+        (
+            "sand.materials.sand.friction_angle_deg=90",
+            "sand.materials.sand.friction_angle_deg",
+        ),
+        (
+            "sand.materials.sand.friction_angle_deg=0",
+            "sand.materials.sand.friction_angle_deg",
+        ),
+        (
+            "sand.materials.sand.poisson_ratio=0.5",
+            "sand.materials.sand.poisson_ratio",
+        ),
+        (
+            "sand.materials.sand.youngs_modulus_pa=0",
+            "sand.materials.sand.youngs_modulus_pa",
+        ),
+        ("sand.solver.cfl=1.5", "sand.solver.cfl"),
+        (
+            "sand.domain.walls.z_min={friction: -1}",
+            "sand.domain.walls.z_min",
+        ),
+        ("duration_s=0", "duration_s"),
+        (
+            "column_collapse.material=gravel",
+            "column_collapse.material",
+        ),
+        (
+            "column_collapse.particles_per_cell=5",
+            "column_collapse.particles_per_cell",
+        ),
+    ] {
+        assert_names(&error_of(SCENE, &[set]), &["scenes/test.yaml", field]);
+    }
+}
+
+#[test]
+fn wall_syntax() {
+    let e = error_of(SCENE, &["sand.domain.walls.x_max=sticcy"]);
+    assert_names(
+        &e,
+        &["sand.domain.walls.x_max", "sticky", "slip", "friction"],
+    );
+}
+
+#[test]
+fn body_outside_the_domain() {
+    // A column taller than the domain.
+    let e = error_of(SCENE, &["column_collapse.aspect_ratio=10"]);
+    assert_names(
+        &e,
+        &[
+            "scenes/test.yaml",
+            "column_collapse",
+            "outside the domain",
+            "axis 2",
+        ],
+    );
+    let e = error_of(
+        SCENE,
+        &["sand.bodies=[{material: sand, box: {min_m: [0.1, 0, 0], max_m: [0.5, 0.009, 0.05]}}]"],
+    );
+    assert_names(&e, &["sand.bodies[0].box", "outside the domain", "axis 0"]);
+}
+
+#[test]
+fn missing_file() {
+    let e = Scene::load(Path::new("config/no_such_scene.yaml"), &[]).unwrap_err();
+    assert!(matches!(e, SceneError::Read { .. }));
+    assert_names(
+        &e.to_string(),
+        &["config/no_such_scene.yaml", "cannot read"],
+    );
+}
+
+#[test]
+fn malformed_yaml_and_bad_override() {
+    assert_names(&error_of("name: [unclosed\n", &[]), &["scenes/test.yaml"]);
+    assert_names(
+        &error_of(SCENE, &["sand.dx_m"]),
+        &["--set sand.dx_m", "key.path=value"],
+    );
+}
