@@ -144,7 +144,7 @@ impl SparseGrid {
         let xg = self.to_grid(x);
         let mut key = 0i64;
         for axis in 0..3 {
-            let base = (xg[axis] - 0.5).floor() as i32;
+            let base = super::kernel::floor_i32(xg[axis] - 0.5);
             let b = (base.div_euclid(BLOCK_EDGE) - self.table_min[axis])
                 .clamp(0, self.table_dims[axis] - 1);
             key = key * self.table_dims[axis] as i64 + b as i64;

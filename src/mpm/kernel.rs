@@ -11,6 +11,14 @@ use nalgebra::Vector3;
 /// Nodes per axis in the quadratic stencil.
 pub const STENCIL: usize = 3;
 
+/// `floor(x)` as an integer, for |x| < 2^31, without a libm call (the baseline x86-64 target
+/// has no rounding instruction, and `f32::floor` is then a function call per axis and particle).
+#[inline(always)]
+pub fn floor_i32(x: f32) -> i32 {
+    let t = x as i32;
+    t - ((t as f32) > x) as i32
+}
+
 /// The 27-node quadratic B-spline stencil of one particle.
 #[derive(Clone, Copy, Debug)]
 pub struct Stencil {
@@ -30,9 +38,9 @@ impl Stencil {
         let mut fx = Vector3::zeros();
         let mut weights = [[0.0f32; STENCIL]; 3];
         for axis in 0..3 {
-            let b = (xg[axis] - 0.5).floor();
-            let f = xg[axis] - b;
-            base[axis] = b as i32;
+            let b = floor_i32(xg[axis] - 0.5);
+            let f = xg[axis] - b as f32;
+            base[axis] = b;
             fx[axis] = f;
             weights[axis] = [
                 0.5 * (1.5 - f) * (1.5 - f),
@@ -60,6 +68,24 @@ impl Stencil {
 mod tests {
     use super::*;
     use rand::{rngs::SmallRng, Rng, SeedableRng};
+
+    #[test]
+    fn integer_floor() {
+        for x in [
+            -2.5f32,
+            -1.0,
+            -0.5,
+            -1e-7,
+            0.0,
+            1e-7,
+            0.5,
+            1.0,
+            2.999,
+            1e6 + 0.5,
+        ] {
+            assert_eq!(floor_i32(x), x.floor() as i32, "floor of {x}");
+        }
+    }
 
     #[test]
     fn partition_of_unity_and_zero_first_moment() {

@@ -34,6 +34,28 @@ pub struct Particles {
     pub id: Vec<u32>,
 }
 
+/// Spare arrays for [`Particles::reorder`], one per element type (about 58 bytes per particle).
+#[derive(Clone, Debug, Default)]
+pub struct ReorderScratch {
+    vectors: Vec<Vector3<f32>>,
+    matrices: Vec<Matrix3<f32>>,
+    scalars: Vec<f32>,
+    materials: Vec<MaterialId>,
+    ids: Vec<u32>,
+}
+
+impl ReorderScratch {
+    /// Bytes held (capacity).
+    pub fn memory_bytes(&self) -> usize {
+        use std::mem::size_of;
+        self.vectors.capacity() * size_of::<Vector3<f32>>()
+            + self.matrices.capacity() * size_of::<Matrix3<f32>>()
+            + self.scalars.capacity() * size_of::<f32>()
+            + self.materials.capacity() * size_of::<MaterialId>()
+            + self.ids.capacity() * size_of::<u32>()
+    }
+}
+
 /// One new particle, at rest in its undeformed state.
 #[derive(Clone, Copy, Debug)]
 pub struct NewParticle {
@@ -69,22 +91,26 @@ impl Particles {
     }
 
     /// Reorders every array by `order`: particle `i` of the result is particle `order[i]` now.
-    pub fn reorder(&mut self, order: &[u32]) {
-        fn gather<T: Copy + Send + Sync>(v: &mut Vec<T>, order: &[u32]) {
+    /// `scratch` holds one spare array per element type, reused from call to call, so sorting
+    /// allocates nothing once the arrays have reached their size.
+    pub fn reorder(&mut self, order: &[u32], scratch: &mut ReorderScratch) {
+        fn gather<T: Copy + Send + Sync>(v: &mut Vec<T>, order: &[u32], spare: &mut Vec<T>) {
             use rayon::prelude::*;
-            let out: Vec<T> = order.par_iter().map(|&i| v[i as usize]).collect();
-            *v = out;
+            spare.clear();
+            spare.par_extend(order.par_iter().map(|&i| v[i as usize]));
+            std::mem::swap(v, spare);
         }
-        gather(&mut self.position, order);
-        gather(&mut self.velocity, order);
-        gather(&mut self.affine, order);
-        gather(&mut self.deformation, order);
-        gather(&mut self.stress, order);
-        gather(&mut self.mass, order);
-        gather(&mut self.volume, order);
-        gather(&mut self.volume_correction, order);
-        gather(&mut self.material, order);
-        gather(&mut self.id, order);
+        let s = scratch;
+        gather(&mut self.position, order, &mut s.vectors);
+        gather(&mut self.velocity, order, &mut s.vectors);
+        gather(&mut self.affine, order, &mut s.matrices);
+        gather(&mut self.deformation, order, &mut s.matrices);
+        gather(&mut self.stress, order, &mut s.matrices);
+        gather(&mut self.mass, order, &mut s.scalars);
+        gather(&mut self.volume, order, &mut s.scalars);
+        gather(&mut self.volume_correction, order, &mut s.scalars);
+        gather(&mut self.material, order, &mut s.materials);
+        gather(&mut self.id, order, &mut s.ids);
     }
 
     /// Bytes held by the particle arrays (capacity, not length).

@@ -12,7 +12,7 @@ use super::grid::{
 };
 use super::kernel::Stencil;
 use super::material::Constitutive;
-use super::particles::{MaterialId, NewParticle, Particles};
+use super::particles::{MaterialId, NewParticle, Particles, ReorderScratch};
 
 /// Particles whose constitutive updates run together (the SVD's SIMD width).
 const LANES: usize = 4;
@@ -155,6 +155,10 @@ pub struct Solver {
     keys: Vec<u32>,
     /// Scratch permutation for sorting.
     order: Vec<u32>,
+    /// Spare particle arrays for sorting.
+    reorder_scratch: ReorderScratch,
+    /// Spare key array for sorting.
+    sorted_keys: Vec<u32>,
     /// Largest particle speed after the last substep (m/s).
     max_speed_m_s: f32,
     /// Simulated time (s).
@@ -179,6 +183,8 @@ impl Solver {
             arena_slots: arena_slots(),
             keys: Vec::new(),
             order: Vec::new(),
+            reorder_scratch: ReorderScratch::default(),
+            sorted_keys: Vec::new(),
             max_speed_m_s: 0.0,
             time_s: 0.0,
             steps: 0,
@@ -272,7 +278,9 @@ impl Solver {
     pub fn memory_bytes(&self) -> usize {
         self.particles.memory_bytes()
             + self.grid.memory_bytes()
-            + (self.keys.capacity() + self.order.capacity()) * std::mem::size_of::<u32>()
+            + self.reorder_scratch.memory_bytes()
+            + (self.keys.capacity() + self.order.capacity() + self.sorted_keys.capacity())
+                * std::mem::size_of::<u32>()
     }
 
     /// Keeps particles sorted by the block of their stencil base node (stable, so the order is
@@ -293,9 +301,12 @@ impl Solver {
         self.order.extend(0..self.particles.len() as u32);
         let keys = &self.keys;
         self.order.par_sort_by_key(|&i| keys[i as usize]);
-        self.particles.reorder(&self.order);
-        let sorted: Vec<u32> = self.order.par_iter().map(|&i| keys[i as usize]).collect();
-        self.keys = sorted;
+        self.particles
+            .reorder(&self.order, &mut self.reorder_scratch);
+        self.sorted_keys.clear();
+        self.sorted_keys
+            .par_extend(self.order.par_iter().map(|&i| keys[i as usize]));
+        std::mem::swap(&mut self.keys, &mut self.sorted_keys);
     }
 
     /// P2G: each particle block scatters into a private 6x6x6 arena, and arenas are added to the
