@@ -1,6 +1,7 @@
 //! Column collapse against the published runout laws (Lube et al. 2005):
 //! (L_inf - L_i)/L_i = 1.2 a for a < 1.8 and 1.9 a^(2/3) for a > 2.8, within 30 %
-//! (continuum Drucker-Prager models over-spread by 10-30 %).
+//! (continuum Drucker-Prager models differ by 10-30 %). Each case takes under two minutes in
+//! release mode on the project's 2-core machine (a = 1: about 40 s, a = 3: about 105 s).
 
 use std::path::Path;
 
@@ -39,7 +40,8 @@ fn low_aspect_ratio_runout_matches_the_linear_law() {
 
 #[test]
 fn high_aspect_ratio_runout_matches_the_power_law() {
-    let (measured, law, _) = collapse(3.5, &["duration_s=1.2"]);
+    // a = 3 collapses in about 3 sqrt(H_i / g) = 0.36 s; 0.9 s lets the front stop.
+    let (measured, law, _) = collapse(3.0, &["duration_s=0.9"]);
     assert!(
         (measured - law).abs() < 0.3 * law,
         "runout {measured} vs {law}"
