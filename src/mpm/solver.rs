@@ -361,7 +361,7 @@ impl Solver {
             .for_each(|(block, coord)| {
                 let first = coord.map(|c| c * BLOCK_EDGE);
                 let near_wall =
-                    (0..3).any(|a| first[a] <= 0 || first[a] + BLOCK_EDGE - 1 >= wall_max_node[a]);
+                    (0..3).any(|a| first[a] <= 0 || first[a] + BLOCK_EDGE > wall_max_node[a]);
                 for (n, node) in block.iter_mut().enumerate() {
                     let mass = node[3];
                     if mass <= 0.0 {

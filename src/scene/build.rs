@@ -8,6 +8,8 @@ use crate::mpm::material::{Constitutive, DruckerPrager, FixedCorotated, Lame};
 use crate::mpm::{NewParticle, Solver, SolverMaterial, SolverSettings, TimeStep, Walls};
 
 /// Checks ranges and references; errors name the file and the field.
+// Negated comparisons (`!(a < b)`) on purpose: they reject NaN too.
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
 pub fn validate(scene: &Scene) -> Result<(), SceneError> {
     let c = &scene.config;
     let positive = |field: &str, v: f64| {
@@ -120,6 +122,7 @@ pub fn validate(scene: &Scene) -> Result<(), SceneError> {
     Ok(())
 }
 
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
 fn validate_body(
     scene: &Scene,
     sand: &SandConfig,
@@ -296,38 +299,38 @@ fn constitutive(m: &MaterialConfig) -> Constitutive {
     }
 }
 
+/// Is a point (m) inside a shape?
+type Inside = Box<dyn Fn(&Vector3<f32>) -> bool>;
+
 /// Particles on a regular lattice of `n^3` per cell (aligned with the grid), inside the body.
 pub fn fill_body(body: &BodyConfig, dx: f32, density: f32, material: u16) -> Vec<NewParticle> {
     let side = lattice_side(body.particles_per_cell).expect("validated") as f32;
     let spacing = dx / side;
     let volume = spacing * spacing * spacing;
-    let (lo, hi, inside): (
-        Vector3<f32>,
-        Vector3<f32>,
-        Box<dyn Fn(&Vector3<f32>) -> bool>,
-    ) = match (&body.box_shape, &body.cylinder) {
-        (Some(b), _) => (
-            b.min_m.into(),
-            b.max_m.into(),
-            Box::new(|_: &Vector3<f32>| true),
-        ),
-        (None, Some(c)) => {
-            let a = c.axis.index();
-            let centre = Vector3::from(c.base_centre_m);
-            let (r, h) = (c.radius_m, c.height_m);
-            let mut lo = centre.add_scalar(-r);
-            let mut hi = centre.add_scalar(r);
-            lo[a] = centre[a];
-            hi[a] = centre[a] + h;
-            let inside = move |x: &Vector3<f32>| {
-                let mut d = x - centre;
-                d[a] = 0.0;
-                d.norm_squared() <= r * r
-            };
-            (lo, hi, Box::new(inside))
-        }
-        (None, None) => unreachable!("validated"),
-    };
+    let (lo, hi, inside): (Vector3<f32>, Vector3<f32>, Inside) =
+        match (&body.box_shape, &body.cylinder) {
+            (Some(b), _) => (
+                b.min_m.into(),
+                b.max_m.into(),
+                Box::new(|_: &Vector3<f32>| true),
+            ),
+            (None, Some(c)) => {
+                let a = c.axis.index();
+                let centre = Vector3::from(c.base_centre_m);
+                let (r, h) = (c.radius_m, c.height_m);
+                let mut lo = centre.add_scalar(-r);
+                let mut hi = centre.add_scalar(r);
+                lo[a] = centre[a];
+                hi[a] = centre[a] + h;
+                let inside = move |x: &Vector3<f32>| {
+                    let mut d = x - centre;
+                    d[a] = 0.0;
+                    d.norm_squared() <= r * r
+                };
+                (lo, hi, Box::new(inside))
+            }
+            (None, None) => unreachable!("validated"),
+        };
     // Lattice points at (i + 1/2) spacing from the box corner.
     let counts = (hi - lo).map(|e| (e / spacing).round().max(1.0) as usize);
     let mut out = Vec::with_capacity(counts.x * counts.y * counts.z);

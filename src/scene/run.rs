@@ -165,7 +165,7 @@ fn run_robot_on_ground(
         let target = (frame as f64 * frame_interval).min(duration);
         let dt = target - sim.time_s();
         // RobotSim::step takes ceil(dt / max_dt_s) rapier steps.
-        steps += (dt / robot.physics.max_dt_s as f64).ceil().max(1.0) as u64;
+        steps += (dt / robot.physics.max_dt_s).ceil().max(1.0) as u64;
         sim.step(dt as f32);
         bar.set_position((target * 1000.0) as u64);
     }
