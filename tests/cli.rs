@@ -9,9 +9,20 @@ fn sandstep(args: &[&str]) -> std::process::Output {
         .unwrap()
 }
 
+/// Runs a command that must succeed and print one JSON object.
+fn sandstep_json(args: &[&str]) -> serde_json::Value {
+    let out = sandstep(args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
 #[test]
 fn run_json_has_the_documented_keys() {
-    let out = sandstep(&[
+    let v = sandstep_json(&[
         "run",
         "config/column_collapse.yaml",
         "--duration",
@@ -20,12 +31,6 @@ fn run_json_has_the_documented_keys() {
         "2",
         "--json",
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     for key in [
         "scene",
         "steps",
@@ -52,7 +57,7 @@ fn run_json_has_the_documented_keys() {
 
 #[test]
 fn bench_json_has_the_documented_keys() {
-    let out = sandstep(&[
+    let v = sandstep_json(&[
         "bench",
         "--particles",
         "4000",
@@ -62,12 +67,6 @@ fn bench_json_has_the_documented_keys() {
         "1",
         "--json",
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert!(v["particles"].as_u64().unwrap() > 3000);
     assert_eq!(v["threads"].as_u64(), Some(1));
     assert!(v["particle_steps_per_s"].as_f64().unwrap() > 0.0);
