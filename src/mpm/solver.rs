@@ -222,7 +222,11 @@ impl Solver {
 
     /// One explicit MLS-MPM substep (physics.md section 1). Returns the dt taken (s).
     pub fn substep(&mut self) -> Result<f32, SimError> {
-        let dt = self.next_dt();
+        self.substep_by(self.next_dt())
+    }
+
+    /// One substep of `dt` seconds.
+    fn substep_by(&mut self, dt: f32) -> Result<f32, SimError> {
         let t = Instant::now();
         self.sort_particles_by_block();
         self.stage_times.sort += t.elapsed();
@@ -254,21 +258,7 @@ impl Solver {
         let mut n = 0;
         while self.time_s < time_s - 1e-12 {
             let remaining = (time_s - self.time_s) as f32;
-            if let TimeStep::Adaptive { cfl, max_dt_s } = self.settings.time_step {
-                if self.next_dt() > remaining {
-                    let saved = self.settings.time_step;
-                    self.settings.time_step = TimeStep::Adaptive {
-                        cfl,
-                        max_dt_s: remaining.min(max_dt_s),
-                    };
-                    let r = self.substep();
-                    self.settings.time_step = saved;
-                    r?;
-                    n += 1;
-                    continue;
-                }
-            }
-            self.substep()?;
+            self.substep_by(self.next_dt().min(remaining))?;
             n += 1;
         }
         Ok(n)
