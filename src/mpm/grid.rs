@@ -89,6 +89,8 @@ impl ParticleBlock {
 pub struct SparseGrid {
     /// Node spacing (m).
     pub dx: f32,
+    /// `1 / dx` (1/m): positions are scaled by it, never divided by dx.
+    inv_dx: f32,
     /// World position of node (0, 0, 0) (m); the domain's min corner.
     pub origin: Vector3<f32>,
     /// Smallest block coordinate the table covers, per axis.
@@ -121,6 +123,7 @@ impl SparseGrid {
         let cells = table_dims.iter().map(|&d| d as usize).product();
         SparseGrid {
             dx,
+            inv_dx: 1.0 / dx,
             origin: min,
             table_min,
             table_dims,
@@ -134,7 +137,7 @@ impl SparseGrid {
     /// Position of a point in grid units (cells from the origin).
     #[inline(always)]
     pub fn to_grid(&self, x: &Vector3<f32>) -> Vector3<f32> {
-        (x - self.origin) / self.dx
+        (x - self.origin) * self.inv_dx
     }
 
     /// Linear key of the block holding the stencil base node of a particle at `x`; keys order

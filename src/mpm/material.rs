@@ -17,7 +17,8 @@
 //!   interpolation material point method for simulating elastoplastic materials" (Hencky StVK
 //!   with Drucker-Prager in MPM).
 
-use crate::mpm::svd::{svd3, svd3_x4, Svd3};
+use crate::mpm::simd::{exp, ln, F4x2, Lanes, F4};
+use crate::mpm::svd::{mat, svd_lanes, Frame, Mat, COLD_START};
 use nalgebra::{Matrix3, Vector3};
 
 /// Floor on singular values before taking logarithms (dimensionless): a particle compressed
@@ -91,29 +92,62 @@ impl Constitutive {
     /// End-of-substep constitutive update of one particle: projects the trial elastic deformation
     /// gradient `f` in place onto the admissible set (plasticity; no-op for elastic), updates the
     /// volume-correction scalar `volume_correction` (log-volume, sand only; untouched otherwise),
-    /// and returns the Kirchhoff stress tau (Pa) of the projected F. One SVD per call.
+    /// and returns the Kirchhoff stress tau (Pa) of the projected F. One SVD per call, warm-started
+    /// from the particle's Jacobi `frame` (see [`svd3_warm`]), which it updates.
     ///
     /// Sand: `F <- U exp(eps) V^T` with `eps` from [`drucker_prager_return`]; `f` is left bit for
     /// bit unchanged when the return mapping changes nothing (inside the cone, no stored volume).
     /// The projected F always has positive singular values, so an inverted particle is restored.
     /// With volume correction off the scalar is set to 0.
-    pub fn update(&self, f: &mut Matrix3<f32>, volume_correction: &mut f32) -> Matrix3<f32> {
-        self.update_with_svd(&svd3(f), f, volume_correction)
+    pub fn update(
+        &self,
+        f: &mut Matrix3<f32>,
+        volume_correction: &mut f32,
+        frame: &mut Frame,
+    ) -> Matrix3<f32> {
+        let out = self.update_lanes::<F4>(
+            &mat(|i, j| F4::splat(f[(i, j)])),
+            F4::splat(*volume_correction),
+            frame.map(F4::splat),
+        );
+        *f = Matrix3::from_fn(|i, j| out.f[i][j].lane(0));
+        *volume_correction = out.volume_correction.lane(0);
+        *frame = out.frame.map(|q| q.lane(0));
+        Matrix3::from_fn(|i, j| out.tau[i][j].lane(0))
     }
 
-    /// [`Self::update`] of four particles at once, bit for bit the same results: the four SVDs
-    /// share one [`svd3_x4`] call, which costs about as much as one [`svd3`].
-    pub fn update_x4(
+    /// The substep's deformation update of eight particles at once: `f` holds F at the start of
+    /// the substep and `step` = dt grad v (MLS-MPM: dt C_p); the trial `F = (I + step) F` is formed
+    /// and then updated as by [`Self::update`] (equal up to rounding and the number of Jacobi
+    /// sweeps, which the slowest lane sets), in two interleaved groups of four SIMD lanes.
+    pub fn update_x8(
         &self,
-        f: &mut [Matrix3<f32>; 4],
-        volume_correction: &mut [f32; 4],
-    ) -> [Matrix3<f32>; 4] {
-        let svds = svd3_x4(f);
-        let mut tau = [Matrix3::zeros(); 4];
-        for (l, tau) in tau.iter_mut().enumerate() {
-            *tau = self.update_with_svd(&svds[l], &mut f[l], &mut volume_correction[l]);
+        step: &[Matrix3<f32>; 8],
+        f: &mut [Matrix3<f32>; 8],
+        volume_correction: &mut [f32; 8],
+        frames: &mut [Frame; 8],
+    ) -> [Matrix3<f32>; 8] {
+        let lanes = |m: &[Matrix3<f32>; 8]| mat(|i, j| F4x2::from_fn(|l| m[l][(i, j)]));
+        let (step, f_old) = (lanes(step), lanes(f));
+        let one = F4x2::splat(1.0);
+        // (I + step) F, row i of the identity contributing F's row i.
+        let f_trial = mat(|i, j| {
+            (0..3).fold(F4x2::splat(0.0), |acc, k| {
+                let a = if i == k { one + step[i][k] } else { step[i][k] };
+                acc + a * f_old[k][j]
+            })
+        });
+        let out = self.update_lanes::<F4x2>(
+            &f_trial,
+            F4x2::from_fn(|l| volume_correction[l]),
+            [0, 1, 2, 3].map(|k| F4x2::from_fn(|l| frames[l][k])),
+        );
+        for l in 0..8 {
+            f[l] = Matrix3::from_fn(|i, j| out.f[i][j].lane(l));
+            volume_correction[l] = out.volume_correction.lane(l);
+            frames[l] = out.frame.map(|q| q.lane(l));
         }
-        tau
+        std::array::from_fn(|l| Matrix3::from_fn(|i, j| out.tau[i][j].lane(l)))
     }
 
     /// Kirchhoff stress (Pa) of a given F without any projection (used at initialisation).
@@ -122,48 +156,55 @@ impl Constitutive {
     /// Fixed corotated: `tau = 2 mu (F - R) F^T + lambda (J - 1) J I` with `R = U V^T`, `J = det F`,
     /// evaluated as `U diag(2 mu (sigma - 1) sigma + lambda (J - 1) J) U^T` (the same tensor).
     pub fn kirchhoff_stress(&self, f: &Matrix3<f32>) -> Matrix3<f32> {
-        self.stress_from_svd(&svd3(f))
-    }
-
-    fn update_with_svd(
-        &self,
-        svd: &Svd3,
-        f: &mut Matrix3<f32>,
-        volume_correction: &mut f32,
-    ) -> Matrix3<f32> {
-        let Self::DruckerPrager(dp) = self else {
-            return self.stress_from_svd(svd);
-        };
-        let Svd3 { u, sigma, v } = svd;
-        let eps_trial = hencky_strain(sigma);
-        let (eps, vc) = drucker_prager_return(
-            eps_trial,
-            *volume_correction,
-            dp.lame,
-            dp.alpha,
-            dp.volume_correction,
-        );
-        if eps != eps_trial || sigma[2] < MIN_SINGULAR_VALUE {
-            let mut us = *u;
-            for k in 0..3 {
-                us.column_mut(k).scale_mut(eps[k].exp());
-            }
-            *f = us * v.transpose();
-        }
-        *volume_correction = vc;
-        principal_to_tensor(u, &hencky_principal_stress(dp.lame, &eps))
-    }
-
-    fn stress_from_svd(&self, Svd3 { u, sigma, .. }: &Svd3) -> Matrix3<f32> {
+        let svd = svd_lanes::<F4>(&mat(|i, j| F4::splat(f[(i, j)])), COLD_START.map(F4::splat));
         let principal = match self {
-            Self::DruckerPrager(dp) => hencky_principal_stress(dp.lame, &hencky_strain(sigma)),
+            Self::DruckerPrager(dp) => hencky_stress(dp.lame, hencky_strain(svd.sigma)),
+            Self::FixedCorotated(fc) => corotated_stress(fc.lame, svd.sigma),
+        };
+        let tau = principal_to_tensor(&svd.u, principal);
+        Matrix3::from_fn(|i, j| tau[i][j].lane(0))
+    }
+
+    /// The update on every lane: SVD, return mapping, projected F and stress, all lane-wise.
+    #[inline(always)]
+    fn update_lanes<L: Lanes>(
+        &self,
+        f: &Mat<L>,
+        volume_correction: L,
+        frame: [L; 4],
+    ) -> LaneUpdate<L> {
+        let svd = svd_lanes(f, frame);
+        let (f, tau, volume_correction) = match self {
             Self::FixedCorotated(fc) => {
-                let Lame { mu, lambda } = fc.lame;
-                let j = sigma.product();
-                sigma.map(|s| 2.0 * mu * (s - 1.0) * s + lambda * (j - 1.0) * j)
+                let tau = principal_to_tensor(&svd.u, corotated_stress(fc.lame, svd.sigma));
+                (*f, tau, volume_correction)
+            }
+            Self::DruckerPrager(dp) => {
+                let eps_trial = hencky_strain(svd.sigma);
+                let (eps, vc) = drucker_prager_return_lanes(eps_trial, volume_correction, dp);
+                // F <- U exp(eps) V^T, kept bit for bit where nothing changed.
+                let stretch = eps.map(exp);
+                let rebuilt = mat(|i, j| {
+                    let uv = |k: usize| svd.u[i][k] * stretch[k] * svd.v[j][k];
+                    uv(0) + uv(1) + uv(2)
+                });
+                let unchanged = (0..3).map(|k| eps[k].eq(eps_trial[k])).fold(
+                    L::splat(MIN_SINGULAR_VALUE)
+                        .lt(svd.sigma[2])
+                        .or(svd.sigma[2].eq(L::splat(MIN_SINGULAR_VALUE))),
+                    L::and,
+                );
+                let f = mat(|i, j| L::select(unchanged, f[i][j], rebuilt[i][j]));
+                let tau = principal_to_tensor(&svd.u, hencky_stress(dp.lame, eps));
+                (f, tau, vc)
             }
         };
-        principal_to_tensor(u, &principal)
+        LaneUpdate {
+            f,
+            tau,
+            volume_correction,
+            frame: svd.frame,
+        }
     }
 
     /// Elastic moduli of the model (Pa), e.g. for the time-step bound.
@@ -220,27 +261,94 @@ pub fn drucker_prager_return(
     (projected, vc)
 }
 
+/// [`drucker_prager_return`] on every lane (the same operations, as lane-wise selects).
+#[inline(always)]
+fn drucker_prager_return_lanes<L: Lanes>(
+    eps_trial: [L; 3],
+    volume_correction: L,
+    dp: &DruckerPrager,
+) -> ([L; 3], L) {
+    let zero = L::splat(0.0);
+    let three = L::splat(3.0);
+    let eps = if dp.volume_correction {
+        let shift = volume_correction / three;
+        eps_trial.map(|e| e + shift)
+    } else {
+        eps_trial
+    };
+    let tr = eps[0] + eps[1] + eps[2];
+    let mean = tr / three;
+    let eps_hat = eps.map(|e| e - mean);
+    let eps_hat_norm =
+        (eps_hat[0] * eps_hat[0] + eps_hat[1] * eps_hat[1] + eps_hat[2] * eps_hat[2]).sqrt();
+    let Lame { mu, lambda } = dp.lame;
+    let dgamma =
+        eps_hat_norm + L::splat((3.0 * lambda + 2.0 * mu) / (2.0 * mu)) * tr * L::splat(dp.alpha);
+    // Division by a zero norm only happens in lanes the selects discard.
+    let shear = dgamma / eps_hat_norm;
+    let (compressed, yielding) = (tr.lt(zero), zero.lt(dgamma));
+    let projected: [L; 3] = std::array::from_fn(|k| {
+        let on_cone = L::select(yielding, eps[k] - eps_hat[k] * shear, eps[k]);
+        L::select(compressed, on_cone, zero)
+    });
+    let vc = if dp.volume_correction {
+        volume_correction + (eps_trial[0] + eps_trial[1] + eps_trial[2])
+            - (projected[0] + projected[1] + projected[2])
+    } else {
+        zero
+    };
+    (projected, vc)
+}
+
+/// The result of [`Constitutive::update_lanes`].
+struct LaneUpdate<L> {
+    f: Mat<L>,
+    /// Kirchhoff stress (Pa).
+    tau: Mat<L>,
+    volume_correction: L,
+    frame: [L; 4],
+}
+
 /// Hencky strain `ln max(|sigma|, MIN_SINGULAR_VALUE)` of singular values.
-fn hencky_strain(sigma: &Vector3<f32>) -> Vector3<f32> {
-    sigma.map(|s| s.abs().max(MIN_SINGULAR_VALUE).ln())
+#[inline(always)]
+fn hencky_strain<L: Lanes>(sigma: [L; 3]) -> [L; 3] {
+    sigma.map(|s| ln(s.abs().max(L::splat(MIN_SINGULAR_VALUE))))
 }
 
 /// Principal Kirchhoff stresses (Pa) of Hencky StVK: `2 mu eps + lambda tr(eps)`.
-fn hencky_principal_stress(lame: Lame, eps: &Vector3<f32>) -> Vector3<f32> {
-    (eps * (2.0 * lame.mu)).add_scalar(lame.lambda * eps.sum())
+#[inline(always)]
+fn hencky_stress<L: Lanes>(lame: Lame, eps: [L; 3]) -> [L; 3] {
+    let volumetric = L::splat(lame.lambda) * (eps[0] + eps[1] + eps[2]);
+    eps.map(|e| L::splat(2.0 * lame.mu) * e + volumetric)
+}
+
+/// Principal Kirchhoff stresses (Pa) of fixed corotated: `2 mu (sigma - 1) sigma + lambda (J - 1) J`.
+#[inline(always)]
+fn corotated_stress<L: Lanes>(lame: Lame, sigma: [L; 3]) -> [L; 3] {
+    let j = sigma[0] * sigma[1] * sigma[2];
+    let one = L::splat(1.0);
+    let volumetric = L::splat(lame.lambda) * (j - one) * j;
+    sigma.map(|s| L::splat(2.0 * lame.mu) * (s - one) * s + volumetric)
 }
 
 /// `U diag(t) U^T`, computed on one triangle and mirrored (exactly symmetric).
-fn principal_to_tensor(u: &Matrix3<f32>, t: &Vector3<f32>) -> Matrix3<f32> {
-    Matrix3::from_fn(|i, j| {
-        let (i, j) = (i.min(j), i.max(j));
-        (0..3).map(|k| u[(i, k)] * t[k] * u[(j, k)]).sum()
-    })
+#[inline(always)]
+fn principal_to_tensor<L: Lanes>(u: &Mat<L>, t: [L; 3]) -> Mat<L> {
+    let entry = |i: usize, j: usize| {
+        u[i][0] * t[0] * u[j][0] + u[i][1] * t[1] * u[j][1] + u[i][2] * t[2] * u[j][2]
+    };
+    let (xy, xz, yz) = (entry(0, 1), entry(0, 2), entry(1, 2));
+    [
+        [entry(0, 0), xy, xz],
+        [xy, entry(1, 1), yz],
+        [xz, yz, entry(2, 2)],
+    ]
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::mpm::svd::{svd3, svd3_warm};
     use rand::rngs::SmallRng;
     use rand::{Rng, SeedableRng};
     use rand_distr::StandardNormal;
@@ -381,7 +489,7 @@ mod tests {
                 let mut vc = 0.0;
                 // Pull apart: lands on the tip, stores the volume gain 3 ln(stretch).
                 let mut f = r1 * stretch;
-                let tau = model.update(&mut f, &mut vc);
+                let tau = model.update(&mut f, &mut vc, &mut COLD_START.clone());
                 assert!(tau.norm() < 1e-3, "{tau}");
                 assert!((f.determinant() - 1.0).abs() < 1e-5);
                 let expect_vc = if use_vc { 3.0 * stretch.ln() } else { 0.0 };
@@ -391,7 +499,7 @@ mod tests {
                 let mut g = Matrix3::identity();
                 g[(0, 1)] = shear;
                 f = r2 * g * f / stretch;
-                model.update(&mut f, &mut vc);
+                model.update(&mut f, &mut vc, &mut COLD_START.clone());
                 final_det[k] = f.determinant();
             }
             let [without, with] = final_det;
@@ -414,7 +522,7 @@ mod tests {
         for _ in 0..2_000 {
             let f0 = rotation(&mut rng) * (Matrix3::identity() + 0.2 * gaussian(&mut rng));
             let (mut f, mut vc) = (f0, 0.25);
-            let tau = jello().update(&mut f, &mut vc);
+            let tau = jello().update(&mut f, &mut vc, &mut COLD_START.clone());
             assert_eq!(
                 (f, vc),
                 (f0, 0.25),
@@ -431,9 +539,12 @@ mod tests {
             // A sand update of a rotation is a no-op with zero stress.
             let r = rotation(&mut rng);
             let (mut f, mut vc) = (r, 0.0);
-            let tau = sand(true).update(&mut f, &mut vc);
+            let tau = sand(true).update(&mut f, &mut vc, &mut COLD_START.clone());
             assert!(
-                tau.norm() < 1e-5 * (l.mu + l.lambda) && (f - r).norm() < 1e-6 && vc.abs() < 1e-6
+                tau.norm() < 1e-5 * (l.mu + l.lambda) && (f - r).norm() < 1e-6 && vc.abs() < 1e-6,
+                "tau {tau} f - r {} vc {vc} svd {:?}",
+                f - r,
+                svd3(&r)
             );
         }
     }
@@ -480,9 +591,9 @@ mod tests {
             let amp = [0.01, 0.1, 0.3][i % 3];
             let f0 = rotation(&mut rng) * (Matrix3::identity() + amp * gaussian(&mut rng));
             let (mut f, mut vc) = (f0, if i % 2 == 0 { 0.05 } else { 0.0 });
-            let tau = model.update(&mut f, &mut vc);
+            let tau = model.update(&mut f, &mut vc, &mut COLD_START.clone());
             assert!(vc >= -1e-6 && f.iter().all(|x| x.is_finite()));
-            let eps = hencky_strain(&svd3(&f).sigma);
+            let eps = svd3(&f).sigma.map(|s| s.abs().max(MIN_SINGULAR_VALUE).ln());
             assert!(
                 eps.sum() <= 1e-5 && yield_value(&eps, dp.lame, dp.alpha) <= 1e-5,
                 "{eps:?}"
@@ -499,7 +610,7 @@ mod tests {
             Matrix3::zeros(),
         ] {
             let (mut f, mut vc) = (f0, 0.0);
-            let tau = model.update(&mut f, &mut vc);
+            let tau = model.update(&mut f, &mut vc, &mut COLD_START.clone());
             assert!(
                 f.determinant() > 0.0 && tau.iter().all(|x| x.is_finite()),
                 "{f}"
@@ -507,21 +618,59 @@ mod tests {
         }
     }
 
+    /// Stress difference (Pa) two f32 decompositions of one F may show: singular values agree to
+    /// about 1e-6 relative, so strains to 1e-6 and stresses to 1e-6 (2 mu + 3 lambda).
+    fn stress_tolerance(model: &Constitutive) -> f32 {
+        let Lame { mu, lambda } = model.lame();
+        2e-6 * (2.0 * mu + 3.0 * lambda)
+    }
+
     #[test]
-    fn update_x4_matches_update() {
+    fn update_x8_matches_update() {
         let mut rng = SmallRng::seed_from_u64(17);
         for model in [sand(true), sand(false), jello()] {
             for _ in 0..500 {
-                let f0: [Matrix3<f32>; 4] = std::array::from_fn(|_| {
+                let f0: [Matrix3<f32>; 8] = std::array::from_fn(|_| {
                     rotation(&mut rng) * (Matrix3::identity() + 0.1 * gaussian(&mut rng))
                 });
-                let vc0: [f32; 4] = std::array::from_fn(|_| rng.random_range(0.0..0.1));
-                let (mut f4, mut vc4) = (f0, vc0);
-                let tau4 = model.update_x4(&mut f4, &mut vc4);
-                for l in 0..4 {
-                    let (mut f, mut vc) = (f0[l], vc0[l]);
-                    assert_eq!(model.update(&mut f, &mut vc), tau4[l]);
-                    assert_eq!((f, vc), (f4[l], vc4[l]));
+                let vc0: [f32; 8] = std::array::from_fn(|_| rng.random_range(0.0..0.1));
+                let step: [Matrix3<f32>; 8] = std::array::from_fn(|_| 0.01 * gaussian(&mut rng));
+                let (mut f8, mut vc8, mut frames) = (f0, vc0, [COLD_START; 8]);
+                let tau8 = model.update_x8(&step, &mut f8, &mut vc8, &mut frames);
+                for l in 0..8 {
+                    let (mut f, mut vc) = ((Matrix3::identity() + step[l]) * f0[l], vc0[l]);
+                    let tau = model.update(&mut f, &mut vc, &mut COLD_START.clone());
+                    let tol = stress_tolerance(&model);
+                    assert!((tau - tau8[l]).norm() < tol, "{tau} vs {}", tau8[l]);
+                    assert!((f - f8[l]).norm() < 1e-5 * f.norm(), "{f} vs {}", f8[l]);
+                    assert!((vc - vc8[l]).abs() < 5e-6, "{vc} vs {}", vc8[l]);
+                }
+            }
+        }
+    }
+
+    /// Warm-started updates along a deformation path agree with cold ones.
+    #[test]
+    fn warm_start_matches_cold_start() {
+        let mut rng = SmallRng::seed_from_u64(19);
+        for model in [sand(true), jello()] {
+            for _ in 0..50 {
+                let (mut f_warm, mut vc_warm, mut frame) = (rotation(&mut rng), 0.0, COLD_START);
+                for _ in 0..100 {
+                    let velocity_gradient = 0.01 * gaussian(&mut rng);
+                    let step = Matrix3::identity() + velocity_gradient;
+                    let (mut f_cold, mut vc_cold) = (step * f_warm, vc_warm);
+                    f_warm = step * f_warm;
+                    let tau_warm = model.update(&mut f_warm, &mut vc_warm, &mut frame);
+                    let tau_cold = model.update(&mut f_cold, &mut vc_cold, &mut COLD_START.clone());
+                    let tol = stress_tolerance(&model);
+                    assert!(
+                        (tau_warm - tau_cold).norm() < tol,
+                        "{tau_warm} vs {tau_cold}"
+                    );
+                    assert!((f_warm - f_cold).norm() < 1e-5 * f_cold.norm());
+                    f_warm = f_cold;
+                    vc_warm = vc_cold;
                 }
             }
         }
@@ -550,17 +699,47 @@ mod tests {
                 best * 1e9 / f0.len() as f64
             );
         };
-        time("Constitutive::update (sand)", &|fs, vcs| {
+        time("Constitutive::update (sand, cold)", &|fs, vcs| {
             fs.iter_mut()
                 .zip(vcs.iter_mut())
-                .map(|(f, vc)| model.update(f, vc)[(0, 1)])
+                .map(|(f, vc)| model.update(f, vc, &mut COLD_START.clone())[(0, 1)])
                 .sum()
         });
-        time("Constitutive::update_x4 (sand)", &|fs, vcs| {
-            let quads = fs.chunks_exact_mut(4).zip(vcs.chunks_exact_mut(4));
-            quads
+        time("Constitutive::update_x8 (sand, cold)", &|fs, vcs| {
+            let groups = fs.chunks_exact_mut(8).zip(vcs.chunks_exact_mut(8));
+            groups
                 .map(|(f, vc)| {
-                    let tau = model.update_x4(f.try_into().unwrap(), vc.try_into().unwrap());
+                    let mut frames = [COLD_START; 8];
+                    let f = f.try_into().unwrap();
+                    let tau = model.update_x8(
+                        &[Matrix3::zeros(); 8],
+                        f,
+                        vc.try_into().unwrap(),
+                        &mut frames,
+                    );
+                    tau[0][(0, 1)]
+                })
+                .sum()
+        });
+        // Warm: frames from a decomposition of the same F a substep earlier (I + 1e-3 noise).
+        let frames: Vec<Frame> = f0
+            .iter()
+            .map(|f| {
+                let mut frame = COLD_START;
+                let earlier = f * (Matrix3::identity() + 1e-3 * gaussian(&mut rng));
+                svd3_warm(&earlier, &mut frame);
+                frame
+            })
+            .collect();
+        time("Constitutive::update_x8 (sand, warm)", &|fs, vcs| {
+            let groups = fs.chunks_exact_mut(8).zip(vcs.chunks_exact_mut(8));
+            groups
+                .zip(frames.chunks_exact(8))
+                .map(|((f, vc), fr)| {
+                    let mut fr: [Frame; 8] = fr.try_into().unwrap();
+                    let f = f.try_into().unwrap();
+                    let tau =
+                        model.update_x8(&[Matrix3::zeros(); 8], f, vc.try_into().unwrap(), &mut fr);
                     tau[0][(0, 1)]
                 })
                 .sum()

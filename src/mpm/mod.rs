@@ -8,6 +8,7 @@ pub mod grid;
 pub mod kernel;
 pub mod material;
 pub mod particles;
+pub mod simd;
 pub mod solver;
 pub mod svd;
 

@@ -6,6 +6,8 @@
 
 use nalgebra::{Matrix3, Vector3};
 
+use super::svd::{Frame, COLD_START};
+
 /// Index of a material in the solver's material list.
 pub type MaterialId = u16;
 
@@ -25,6 +27,8 @@ pub struct Particles {
     pub mass: Vec<f32>,
     /// Initial (undeformed) volume V_p^0 (m^3).
     pub volume: Vec<f32>,
+    /// Jacobi frame of the last SVD of F_p (unit quaternion): warm start of the next one.
+    pub svd_frame: Vec<Frame>,
     /// Drucker-Prager volume-correction scalar (log of volume, dimensionless; 0 for elastic).
     pub volume_correction: Vec<f32>,
     /// Material of each particle.
@@ -34,12 +38,13 @@ pub struct Particles {
     pub id: Vec<u32>,
 }
 
-/// Spare arrays for [`Particles::reorder`], one per element type (about 58 bytes per particle).
+/// Spare arrays for [`Particles::reorder`], one per element type (about 74 bytes per particle).
 #[derive(Clone, Debug, Default)]
 pub struct ReorderScratch {
     vectors: Vec<Vector3<f32>>,
     matrices: Vec<Matrix3<f32>>,
     scalars: Vec<f32>,
+    frames: Vec<Frame>,
     materials: Vec<MaterialId>,
     ids: Vec<u32>,
 }
@@ -51,6 +56,7 @@ impl ReorderScratch {
         self.vectors.capacity() * size_of::<Vector3<f32>>()
             + self.matrices.capacity() * size_of::<Matrix3<f32>>()
             + self.scalars.capacity() * size_of::<f32>()
+            + self.frames.capacity() * size_of::<Frame>()
             + self.materials.capacity() * size_of::<MaterialId>()
             + self.ids.capacity() * size_of::<u32>()
     }
@@ -83,6 +89,7 @@ impl Particles {
         self.affine.push(Matrix3::zeros());
         self.deformation.push(Matrix3::identity());
         self.stress.push(Matrix3::zeros());
+        self.svd_frame.push(COLD_START);
         self.mass.push(p.mass);
         self.volume.push(p.volume);
         self.volume_correction.push(0.0);
@@ -106,6 +113,7 @@ impl Particles {
         gather(&mut self.affine, order, &mut s.matrices);
         gather(&mut self.deformation, order, &mut s.matrices);
         gather(&mut self.stress, order, &mut s.matrices);
+        gather(&mut self.svd_frame, order, &mut s.frames);
         gather(&mut self.mass, order, &mut s.scalars);
         gather(&mut self.volume, order, &mut s.scalars);
         gather(&mut self.volume_correction, order, &mut s.scalars);
@@ -121,6 +129,7 @@ impl Particles {
             + self.affine.capacity() * size_of::<Matrix3<f32>>()
             + self.deformation.capacity() * size_of::<Matrix3<f32>>()
             + self.stress.capacity() * size_of::<Matrix3<f32>>()
+            + self.svd_frame.capacity() * size_of::<Frame>()
             + (self.mass.capacity() + self.volume.capacity() + self.volume_correction.capacity())
                 * size_of::<f32>()
             + self.material.capacity() * size_of::<MaterialId>()

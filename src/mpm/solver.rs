@@ -13,9 +13,11 @@ use super::grid::{
 use super::kernel::Stencil;
 use super::material::Constitutive;
 use super::particles::{MaterialId, NewParticle, Particles, ReorderScratch};
+use super::simd::F4;
+use super::svd::{Frame, COLD_START};
 
 /// Particles whose constitutive updates run together (the SVD's SIMD width).
-const LANES: usize = 4;
+const LANES: usize = 8;
 
 /// A material the particles can be made of.
 #[derive(Clone, Debug)]
@@ -315,7 +317,7 @@ impl Solver {
                 .par_iter()
                 .filter(|pb| pb.phase() == phase)
                 .for_each(|pb| {
-                    let mut arena = [[0.0f32; 4]; ARENA_NODES];
+                    let mut arena = [F4::splat(0.0); ARENA_NODES];
                     for p in pb.start..pb.end {
                         let s = Stencil::new(self.grid.to_grid(&particles.position[p]));
                         let m = particles.mass[p];
@@ -330,9 +332,7 @@ impl Solver {
                         let block =
                             unsafe { grid_blocks.get_mut(pb.arena_blocks[slot.block as usize]) };
                         let node = &mut block[slot.node as usize];
-                        for c in 0..4 {
-                            node[c] += arena[a][c];
-                        }
+                        *node = (F4::from_array(*node) + arena[a]).to_array();
                     }
                 });
         }
@@ -373,87 +373,22 @@ impl Solver {
     /// G2P: gathers velocity and the affine matrix, updates F, advects, keeps particles in the
     /// domain, applies the constitutive update and checks every particle for blow-up.
     fn grid_to_particle(&mut self, dt: f32) -> Result<(), SimError> {
-        let dx = self.settings.dx;
-        let (lo, hi) = (self.settings.domain_min, self.settings.domain_max);
-        let blowup_sq = self.settings.blowup_speed_m_s * self.settings.blowup_speed_m_s;
-        let grid = &self.grid;
-        let slots = &self.arena_slots;
-        let materials = &self.materials;
-        let blocks = &grid.particle_blocks;
+        let context = G2pContext {
+            grid: &self.grid,
+            slots: &self.arena_slots,
+            materials: &self.materials,
+            dt,
+            dx: self.settings.dx,
+            lo: self.settings.domain_min,
+            hi: self.settings.domain_max,
+            blowup_speed_sq: self.settings.blowup_speed_m_s * self.settings.blowup_speed_m_s,
+        };
+        let blocks = &self.grid.particle_blocks;
         let views = G2pView::split(&mut self.particles, blocks);
         let summary = views
             .into_par_iter()
             .zip(blocks.par_iter())
-            .map(|(view, pb)| {
-                let mut arena = [Vector3::<f32>::zeros(); ARENA_NODES];
-                for (a, slot) in slots.iter().enumerate() {
-                    let n = &grid.blocks[pb.arena_blocks[slot.block as usize] as usize]
-                        [slot.node as usize];
-                    arena[a] = Vector3::new(n[0], n[1], n[2]);
-                }
-                let mut summary = G2pSummary::default();
-                // Four particles at a time: their constitutive updates share one 4-lane SVD.
-                for chunk in (0..view.position.len()).step_by(LANES) {
-                    let lanes = (view.position.len() - chunk).min(LANES);
-                    // Unused lanes carry an undeformed F: harmless for every model.
-                    let mut f = [Matrix3::identity(); LANES];
-                    let mut vc = [0.0f32; LANES];
-                    for lane in 0..lanes {
-                        let i = chunk + lane;
-                        let x = view.position[i];
-                        let s = Stencil::new(grid.to_grid(&x));
-                        let (v, b) = gather(&arena, &s, local_base(&s, pb));
-                        // C_p = (4/dx^2) sum w v_i (x_i - x_p)^T, with offsets in cells.
-                        let c = b * (4.0 / dx);
-                        f[lane] = (Matrix3::identity() + c * dt) * view.deformation[i];
-                        vc[lane] = view.volume_correction[i];
-                        view.position[i] = (x + v * dt).sup(&lo).inf(&hi);
-                        view.velocity[i] = v;
-                        view.affine[i] = c;
-                    }
-                    let material = view.material[chunk];
-                    let tau = if view.material[chunk..chunk + lanes]
-                        .iter()
-                        .all(|&m| m == material)
-                    {
-                        materials[material as usize]
-                            .model
-                            .update_x4(&mut f, &mut vc)
-                    } else {
-                        std::array::from_fn(|lane| {
-                            let m = view.material.get(chunk + lane).copied().unwrap_or(material);
-                            materials[m as usize]
-                                .model
-                                .update(&mut f[lane], &mut vc[lane])
-                        })
-                    };
-                    for lane in 0..lanes {
-                        let i = chunk + lane;
-                        view.deformation[i] = f[lane];
-                        view.volume_correction[i] = vc[lane];
-                        view.stress[i] = tau[lane];
-                        let (x, v) = (view.position[i], view.velocity[i]);
-                        let speed_sq = v.norm_squared();
-                        summary.max_speed_sq = summary.max_speed_sq.max(speed_sq);
-                        if summary.bad.is_none() {
-                            let finite =
-                                (x.sum() + speed_sq + tau[lane].sum() + f[lane].sum()).is_finite();
-                            let what = if !finite {
-                                Some("has a non-finite state".to_string())
-                            } else if speed_sq > blowup_sq {
-                                Some(format!("moves at {:.3e} m/s", speed_sq.sqrt()))
-                            } else {
-                                None
-                            };
-                            summary.bad = what.map(|what| BadParticle {
-                                index: pb.start + i,
-                                what,
-                            });
-                        }
-                    }
-                }
-                summary
-            })
+            .map(|(view, pb)| grid_to_particle_block(&context, view, pb))
             .reduce(G2pSummary::default, G2pSummary::merge);
         self.max_speed_m_s = summary.max_speed_sq.sqrt();
         match summary.bad {
@@ -471,6 +406,112 @@ impl Solver {
     }
 }
 
+/// What G2P reads besides the particles.
+struct G2pContext<'a> {
+    grid: &'a SparseGrid,
+    slots: &'a [ArenaSlot; ARENA_NODES],
+    materials: &'a [SolverMaterial],
+    /// Substep (s).
+    dt: f32,
+    /// Grid spacing (m).
+    dx: f32,
+    /// Domain box (m): particles are clamped into it.
+    lo: Vector3<f32>,
+    hi: Vector3<f32>,
+    /// Squared speed (m^2/s^2) above which a particle counts as blown up.
+    blowup_speed_sq: f32,
+}
+
+/// G2P of one particle block: loads its 6x6x6 arena of node velocities once, then per particle
+/// gathers v and C, updates F, advects and clamps, applies the constitutive update (eight
+/// particles per SIMD call) and checks for blow-up.
+#[inline(never)]
+fn grid_to_particle_block(cx: &G2pContext, view: G2pView, pb: &ParticleBlock) -> G2pSummary {
+    let G2pContext {
+        grid,
+        slots,
+        materials,
+        dt,
+        dx,
+        lo,
+        hi,
+        blowup_speed_sq: blowup_sq,
+    } = *cx;
+    let mut arena = [F4::splat(0.0); ARENA_NODES];
+    for (a, slot) in slots.iter().enumerate() {
+        arena[a] = F4::from_array(
+            grid.blocks[pb.arena_blocks[slot.block as usize] as usize][slot.node as usize],
+        );
+    }
+    let mut summary = G2pSummary::default();
+    // Eight particles at a time: their constitutive updates share one 8-lane SVD.
+    for chunk in (0..view.position.len()).step_by(LANES) {
+        let lanes = (view.position.len() - chunk).min(LANES);
+        // Unused lanes carry an undeformed, unmoved F: harmless for every model.
+        let mut f = [Matrix3::identity(); LANES];
+        let mut step = [Matrix3::zeros(); LANES];
+        let mut vc = [0.0f32; LANES];
+        let mut frames = [COLD_START; LANES];
+        for lane in 0..lanes {
+            let i = chunk + lane;
+            let x = view.position[i];
+            let s = Stencil::new(grid.to_grid(&x));
+            let (v, b) = gather(&arena, &s, local_base(&s, pb));
+            // C_p = (4/dx^2) sum w v_i (x_i - x_p)^T, with offsets in cells.
+            let c = b * (4.0 / dx);
+            f[lane] = view.deformation[i];
+            step[lane] = c * dt;
+            vc[lane] = view.volume_correction[i];
+            frames[lane] = view.svd_frame[i];
+            view.position[i] = (x + v * dt).sup(&lo).inf(&hi);
+            view.velocity[i] = v;
+            view.affine[i] = c;
+        }
+        let material = view.material[chunk];
+        let tau = if view.material[chunk..chunk + lanes]
+            .iter()
+            .all(|&m| m == material)
+        {
+            materials[material as usize]
+                .model
+                .update_x8(&step, &mut f, &mut vc, &mut frames)
+        } else {
+            std::array::from_fn(|lane| {
+                let m = view.material.get(chunk + lane).copied().unwrap_or(material);
+                f[lane] = (Matrix3::identity() + step[lane]) * f[lane];
+                materials[m as usize]
+                    .model
+                    .update(&mut f[lane], &mut vc[lane], &mut frames[lane])
+            })
+        };
+        for lane in 0..lanes {
+            let i = chunk + lane;
+            view.deformation[i] = f[lane];
+            view.volume_correction[i] = vc[lane];
+            view.svd_frame[i] = frames[lane];
+            view.stress[i] = tau[lane];
+            let (x, v) = (view.position[i], view.velocity[i]);
+            let speed_sq = v.norm_squared();
+            summary.max_speed_sq = summary.max_speed_sq.max(speed_sq);
+            if summary.bad.is_none() {
+                let finite = (x.sum() + speed_sq + tau[lane].sum() + f[lane].sum()).is_finite();
+                let what = if !finite {
+                    Some("has a non-finite state".to_string())
+                } else if speed_sq > blowup_sq {
+                    Some(format!("moves at {:.3e} m/s", speed_sq.sqrt()))
+                } else {
+                    None
+                };
+                summary.bad = what.map(|what| BadParticle {
+                    index: pb.start + i,
+                    what,
+                });
+            }
+        }
+    }
+    summary
+}
+
 /// Offset of a particle's stencil base node inside its block's arena (each in `0..4`).
 #[inline(always)]
 fn local_base(s: &Stencil, pb: &ParticleBlock) -> [usize; 3] {
@@ -479,65 +520,75 @@ fn local_base(s: &Stencil, pb: &ParticleBlock) -> [usize; 3] {
 
 /// Adds one particle's mass and momentum `w_ip (m_p v_p + Q_p (x_i - x_p))` to its 27 arena
 /// nodes; `q_cells` is Q_p scaled for offsets in cells. With `x_i - x_p = (i, j, k) - fx` (cells)
-/// the affine term is built up one axis at a time: three vector adds per node.
+/// the affine term is built up one axis at a time, and a node's four components
+/// `[p_x, p_y, p_z, m]` are one SIMD vector: two multiplies and two adds per node.
 #[inline(always)]
 fn scatter(
-    arena: &mut [[f32; 4]; ARENA_NODES],
+    arena: &mut [F4; ARENA_NODES],
     s: &Stencil,
     base: [usize; 3],
     mass: f32,
     momentum: Vector3<f32>,
     q_cells: &Matrix3<f32>,
 ) {
-    let (qx, qy, qz) = (q_cells.column(0), q_cells.column(1), q_cells.column(2));
-    let at_base = momentum - q_cells * s.fx;
+    // Columns of Q with a zero mass lane; the mass lane of `at_base` carries m_p.
+    let q =
+        [0, 1, 2].map(|c| F4::from_array([q_cells[(0, c)], q_cells[(1, c)], q_cells[(2, c)], 0.0]));
+    let p = momentum - q_cells * s.fx;
+    let at_base = F4::from_array([p.x, p.y, p.z, mass]);
+    let w_k = s.weights[2].map(F4::splat);
+    let mut p_i = at_base;
     for i in 0..3 {
-        let p_i = at_base + qx * i as f32;
+        let mut p_ij = p_i;
         for j in 0..3 {
-            let p_ij = p_i + qy * j as f32;
-            let w_ij = s.weights[0][i] * s.weights[1][j];
+            let w_ij = F4::splat(s.weights[0][i] * s.weights[1][j]);
             let row = node_in_arena(base[0] + i, base[1] + j, base[2]);
-            for k in 0..3 {
-                let w = w_ij * s.weights[2][k];
-                let p = (p_ij + qz * k as f32) * w;
-                let node = &mut arena[row + k];
-                node[0] += p.x;
-                node[1] += p.y;
-                node[2] += p.z;
-                node[3] += w * mass;
-            }
+            let p_ij0 = p_ij * w_ij;
+            let q_k = q[2] * w_ij;
+            arena[row] = arena[row] + p_ij0 * w_k[0];
+            arena[row + 1] = arena[row + 1] + (p_ij0 + q_k) * w_k[1];
+            arena[row + 2] = arena[row + 2] + (p_ij0 + q_k + q_k) * w_k[2];
+            p_ij = p_ij + q[1];
         }
+        p_i = p_i + q[0];
     }
 }
 
 /// Gathers `(sum w_i v_i, sum w_i v_i d_i^T)` over the 27 stencil nodes, `d_i` in cells. The
-/// outer product is summed per axis: `sum w v (i, j, k)^T - (sum w v) fx^T`.
+/// outer product is summed per axis: `sum w v (i, j, k)^T - (sum w v) fx^T`. Arena nodes are
+/// SIMD vectors `[v_x, v_y, v_z, m]`; the mass lane is summed along and ignored.
 #[inline(always)]
 fn gather(
-    arena: &[Vector3<f32>; ARENA_NODES],
+    arena: &[F4; ARENA_NODES],
     s: &Stencil,
     base: [usize; 3],
 ) -> (Vector3<f32>, Matrix3<f32>) {
-    let mut v = Vector3::zeros();
-    let (mut by_i, mut by_j, mut by_k) = (Vector3::zeros(), Vector3::zeros(), Vector3::zeros());
+    let zero = F4::splat(0.0);
+    let w_k = s.weights[2].map(F4::splat);
+    let (mut v, mut by_i, mut by_j, mut by_k) = (zero, zero, zero, zero);
     for i in 0..3 {
-        let mut v_i = Vector3::zeros();
+        let mut v_i = zero;
         for j in 0..3 {
-            let w_ij = s.weights[0][i] * s.weights[1][j];
+            let w_ij = F4::splat(s.weights[0][i] * s.weights[1][j]);
             let row = node_in_arena(base[0] + i, base[1] + j, base[2]);
-            let mut v_ij = Vector3::zeros();
-            for k in 0..3 {
-                let wv = arena[row + k] * (w_ij * s.weights[2][k]);
-                v_ij += wv;
-                by_k += wv * k as f32;
-            }
-            v_i += v_ij;
-            by_j += v_ij * j as f32;
+            let v0 = arena[row] * w_k[0];
+            let v1 = arena[row + 1] * w_k[1];
+            let v2 = arena[row + 2] * w_k[2];
+            let v_ij = (v0 + v1 + v2) * w_ij;
+            by_k = by_k + (v1 + v2 + v2) * w_ij;
+            v_i = v_i + v_ij;
+            by_j = by_j + v_ij * F4::splat(j as f32);
         }
-        v += v_i;
-        by_i += v_i * i as f32;
+        v = v + v_i;
+        by_i = by_i + v_i * F4::splat(i as f32);
     }
-    let b = Matrix3::from_columns(&[by_i, by_j, by_k]) - v * s.fx.transpose();
+    let column = |c: F4| {
+        let [x, y, z, _] = c.to_array();
+        Vector3::new(x, y, z)
+    };
+    let v = column(v);
+    let b =
+        Matrix3::from_columns(&[column(by_i), column(by_j), column(by_k)]) - v * s.fx.transpose();
     (v, b)
 }
 
@@ -549,6 +600,7 @@ struct G2pView<'a> {
     deformation: &'a mut [Matrix3<f32>],
     stress: &'a mut [Matrix3<f32>],
     volume_correction: &'a mut [f32],
+    svd_frame: &'a mut [Frame],
     material: &'a [MaterialId],
 }
 
@@ -560,6 +612,7 @@ impl<'a> G2pView<'a> {
         let mut deformation = split_runs(&mut p.deformation, blocks).into_iter();
         let mut stress = split_runs(&mut p.stress, blocks).into_iter();
         let mut volume_correction = split_runs(&mut p.volume_correction, blocks).into_iter();
+        let mut svd_frame = split_runs(&mut p.svd_frame, blocks).into_iter();
         let material = &p.material[..];
         (0..blocks.len())
             .map(|b| G2pView {
@@ -569,6 +622,7 @@ impl<'a> G2pView<'a> {
                 deformation: deformation.next().unwrap(),
                 stress: stress.next().unwrap(),
                 volume_correction: volume_correction.next().unwrap(),
+                svd_frame: svd_frame.next().unwrap(),
                 material: &material[blocks[b].start..blocks[b].end],
             })
             .collect()
@@ -811,7 +865,8 @@ mod tests {
             p.velocity[q] = v;
             p.affine[q] = c;
             let mut vc = p.volume_correction[q];
-            p.stress[q] = s.materials[0].model.update(&mut p.deformation[q], &mut vc);
+            let model = &s.materials[0].model;
+            p.stress[q] = model.update(&mut p.deformation[q], &mut vc, &mut p.svd_frame[q]);
             p.volume_correction[q] = vc;
         }
     }
