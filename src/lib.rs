@@ -6,6 +6,7 @@
 
 pub mod analysis;
 pub mod bench;
+pub mod coupling;
 pub mod mpm;
 pub mod robot;
 pub mod scene;

@@ -140,6 +140,11 @@ impl SparseGrid {
         (x - self.origin) * self.inv_dx
     }
 
+    /// World position of the grid node with global index `index` (m).
+    pub fn node_position(&self, index: [i32; 3]) -> Vector3<f32> {
+        self.origin + Vector3::new(index[0] as f32, index[1] as f32, index[2] as f32) * self.dx
+    }
+
     /// Linear key of the block holding the stencil base node of a particle at `x`; keys order
     /// blocks x-major, and `rebuild` expects particles sorted by it.
     #[inline]

@@ -4,6 +4,7 @@
 //! (see `docs/physics.md`, section 1), each stage timed by name in [`StageTimes`].
 
 pub mod boundary;
+pub mod cpic;
 pub mod grid;
 pub mod kernel;
 pub mod material;

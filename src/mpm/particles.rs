@@ -29,6 +29,8 @@ pub struct Particles {
     pub volume: Vec<f32>,
     /// Jacobi frame of the last SVD of F_p (unit quaternion): warm start of the next one.
     pub svd_frame: Vec<Frame>,
+    /// CPIC tags: affinity (bit 2r) and side (bit 2r + 1) per collider r (see `mpm::cpic`).
+    pub cpic_tags: Vec<u64>,
     /// Drucker-Prager volume-correction scalar (log of volume, dimensionless; 0 for elastic).
     pub volume_correction: Vec<f32>,
     /// Material of each particle.
@@ -38,13 +40,14 @@ pub struct Particles {
     pub id: Vec<u32>,
 }
 
-/// Spare arrays for [`Particles::reorder`], one per element type (about 74 bytes per particle).
+/// Spare arrays for [`Particles::reorder`], one per element type (about 82 bytes per particle).
 #[derive(Clone, Debug, Default)]
 pub struct ReorderScratch {
     vectors: Vec<Vector3<f32>>,
     matrices: Vec<Matrix3<f32>>,
     scalars: Vec<f32>,
     frames: Vec<Frame>,
+    tags: Vec<u64>,
     materials: Vec<MaterialId>,
     ids: Vec<u32>,
 }
@@ -57,6 +60,7 @@ impl ReorderScratch {
             + self.matrices.capacity() * size_of::<Matrix3<f32>>()
             + self.scalars.capacity() * size_of::<f32>()
             + self.frames.capacity() * size_of::<Frame>()
+            + self.tags.capacity() * size_of::<u64>()
             + self.materials.capacity() * size_of::<MaterialId>()
             + self.ids.capacity() * size_of::<u32>()
     }
@@ -90,6 +94,7 @@ impl Particles {
         self.deformation.push(Matrix3::identity());
         self.stress.push(Matrix3::zeros());
         self.svd_frame.push(COLD_START);
+        self.cpic_tags.push(0);
         self.mass.push(p.mass);
         self.volume.push(p.volume);
         self.volume_correction.push(0.0);
@@ -114,6 +119,7 @@ impl Particles {
         gather(&mut self.deformation, order, &mut s.matrices);
         gather(&mut self.stress, order, &mut s.matrices);
         gather(&mut self.svd_frame, order, &mut s.frames);
+        gather(&mut self.cpic_tags, order, &mut s.tags);
         gather(&mut self.mass, order, &mut s.scalars);
         gather(&mut self.volume, order, &mut s.scalars);
         gather(&mut self.volume_correction, order, &mut s.scalars);
@@ -130,6 +136,7 @@ impl Particles {
             + self.deformation.capacity() * size_of::<Matrix3<f32>>()
             + self.stress.capacity() * size_of::<Matrix3<f32>>()
             + self.svd_frame.capacity() * size_of::<Frame>()
+            + self.cpic_tags.capacity() * size_of::<u64>()
             + (self.mass.capacity() + self.volume.capacity() + self.volume_correction.capacity())
                 * size_of::<f32>()
             + self.material.capacity() * size_of::<MaterialId>()

@@ -6,6 +6,10 @@ use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
 use super::boundary::Walls;
+use super::cpic::{
+    conflict_normal, conflicts, ghost_velocity, stencil_nodes, update_tags, wall_distance,
+    ColliderImpulse, ColliderMotion, ColourBlock, NodeColour, PENALTY_MAX_CELLS, PENALTY_MIN_CELLS,
+};
 use super::grid::{
     arena_slots, node_in_arena, ArenaSlot, Block, ParticleBlock, SparseGrid, ARENA_NODES,
     BLOCK_EDGE,
@@ -78,14 +82,17 @@ pub struct StageTimes {
     pub grid_update: Duration,
     /// Grid to particle transfer, advection, constitutive update, blow-up check.
     pub g2p: Duration,
+    /// CPIC: colouring the grid near colliders and updating particle tags.
+    pub cpic: Duration,
 }
 
 impl StageTimes {
     /// `(name, time)` of every stage, in substep order.
-    pub fn named(&self) -> [(&'static str, Duration); 5] {
+    pub fn named(&self) -> [(&'static str, Duration); 6] {
         [
             ("sort", self.sort),
             ("grid_alloc", self.grid_alloc),
+            ("cpic", self.cpic),
             ("p2g", self.p2g),
             ("grid_update", self.grid_update),
             ("g2p", self.g2p),
@@ -129,6 +136,8 @@ struct BadParticle {
 struct G2pSummary {
     max_speed_sq: f32,
     bad: Option<BadParticle>,
+    /// Penalty impulses per collider (empty where no particle is near one).
+    impulses: Vec<ColliderImpulse>,
 }
 
 impl G2pSummary {
@@ -140,6 +149,7 @@ impl G2pSummary {
         G2pSummary {
             max_speed_sq: self.max_speed_sq.max(other.max_speed_sq),
             bad,
+            impulses: add_impulses(self.impulses, &other.impulses),
         }
     }
 }
@@ -161,6 +171,10 @@ pub struct Solver {
     reorder_scratch: ReorderScratch,
     /// Spare key array for sorting.
     sorted_keys: Vec<u32>,
+    /// CPIC colours of the grid blocks near colliders, for the current substep.
+    colours: GridColours,
+    /// Whether some particle carries CPIC tags (so they must be updated or cleared).
+    tagged: bool,
     /// Largest particle speed after the last substep (m/s).
     max_speed_m_s: f32,
     /// Simulated time (s).
@@ -187,6 +201,8 @@ impl Solver {
             order: Vec::new(),
             reorder_scratch: ReorderScratch::default(),
             sorted_keys: Vec::new(),
+            colours: GridColours::default(),
+            tagged: false,
             max_speed_m_s: 0.0,
             time_s: 0.0,
             steps: 0,
@@ -227,33 +243,100 @@ impl Solver {
         self.substep_by(self.next_dt())
     }
 
-    /// One substep of `dt` seconds.
+    /// One substep of `dt` seconds, with no colliders.
     fn substep_by(&mut self, dt: f32) -> Result<f32, SimError> {
+        self.begin_substep();
+        self.finish_substep(dt, &[]).map(|_| dt)
+    }
+
+    /// First half of a substep: sorts the particles and allocates the grid. A coupling may then
+    /// colour the grid near its colliders ([`Self::colour_nodes`]) before
+    /// [`Self::finish_substep`].
+    pub fn begin_substep(&mut self) {
         let t = Instant::now();
         self.sort_particles_by_block();
         self.stage_times.sort += t.elapsed();
 
         let t = Instant::now();
         self.grid.rebuild(&self.keys);
+        self.colours.clear(self.grid.blocks.len());
         self.stage_times.grid_alloc += t.elapsed();
+    }
+
+    /// Gives the CPIC colours of the active blocks: `colour(block)` returns the colours of the
+    /// block at block coordinate `block` (its node `n` is grid node `4 block + local(n)`, see
+    /// [`SparseGrid::node_position`]), or None if no collider is near. Runs in parallel.
+    pub fn colour_nodes(&mut self, colour: impl Fn([i32; 3]) -> Option<ColourBlock> + Sync) {
+        let t = Instant::now();
+        let coloured: Vec<Option<ColourBlock>> =
+            self.grid.coords.par_iter().map(|&c| colour(c)).collect();
+        for (slot, c) in coloured.into_iter().enumerate() {
+            if let Some(c) = c {
+                self.colours.of_block[slot] = self.colours.blocks.len() as u32;
+                self.colours.blocks.push(c);
+            }
+        }
+        self.stage_times.cpic += t.elapsed();
+    }
+
+    /// Second half of a substep: P2G, grid update and G2P of `dt` seconds, with CPIC against
+    /// `colliders` (indexed like the colour bits) wherever the grid was coloured. Returns the
+    /// momentum the sand handed to each collider during the substep.
+    pub fn finish_substep(
+        &mut self,
+        dt: f32,
+        colliders: &[ColliderMotion],
+    ) -> Result<Vec<ColliderImpulse>, SimError> {
+        let t = Instant::now();
+        self.update_particle_tags();
+        self.stage_times.cpic += t.elapsed();
 
         let t = Instant::now();
-        self.particle_to_grid(dt);
+        let p2g_impulses = self.particle_to_grid(dt, colliders);
         self.stage_times.p2g += t.elapsed();
 
         let t = Instant::now();
-        self.update_grid(dt);
+        self.update_grid(dt, colliders);
         self.stage_times.grid_update += t.elapsed();
 
         let t = Instant::now();
-        let result = self.grid_to_particle(dt);
+        let result = self.grid_to_particle(dt, colliders);
         self.stage_times.g2p += t.elapsed();
 
         self.time_s += dt as f64;
         self.steps += 1;
-        result.map(|()| dt)
+        let mut impulses = add_impulses(result?, &p2g_impulses);
+        impulses.resize(colliders.len(), ColliderImpulse::default());
+        Ok(impulses)
     }
 
+    /// Keeps each particle's CPIC tags (see [`super::cpic::update_tags`]); clears them away from
+    /// colliders. Free when no collider is near and no particle is tagged.
+    fn update_particle_tags(&mut self) {
+        if self.colours.blocks.is_empty() && !self.tagged {
+            return;
+        }
+        let grid = &self.grid;
+        let colours = &self.colours;
+        let positions = &self.particles.position;
+        let blocks = &grid.particle_blocks;
+        let runs = split_runs(&mut self.particles.cpic_tags, blocks);
+        self.tagged = runs
+            .into_par_iter()
+            .zip(blocks.par_iter())
+            .map(|(tags, pb)| {
+                let Some(arena) = colours.arena(pb) else {
+                    tags.fill(0);
+                    return false;
+                };
+                for (tag, x) in tags.iter_mut().zip(&positions[pb.start..pb.end]) {
+                    let s = Stencil::new(grid.to_grid(x));
+                    *tag = update_tags(*tag, &arena[..], &s, local_base(&s, pb));
+                }
+                tags.iter().any(|&t| t != 0)
+            })
+            .reduce(|| false, |a, b| a || b);
+    }
     /// Substeps until the simulated time reaches `time_s`; the last step is shortened to land on
     /// it. Returns the number of substeps taken.
     pub fn advance_to(&mut self, time_s: f64) -> Result<u64, SimError> {
@@ -304,27 +387,60 @@ impl Solver {
     /// P2G: each particle block scatters into a private 6x6x6 arena, and arenas are added to the
     /// grid in 8 phases by block parity, so no two writers ever share a node (no atomics, no
     /// locks).
-    fn particle_to_grid(&mut self, dt: f32) {
+    fn particle_to_grid(&mut self, dt: f32, colliders: &[ColliderMotion]) -> Vec<ColliderImpulse> {
         let dx = self.settings.dx;
         // Q_p = -dt V_p (4/dx^2) tau_p + m_p C_p, applied to offsets measured in cells.
         let stress_scale = -dt * 4.0 / (dx * dx) * dx;
         let particles = &self.particles;
+        let colours = &self.colours;
         let grid_blocks = SharedBlocks::new(&mut self.grid.blocks);
         let slots = &self.arena_slots;
+        let mut impulses = Vec::new();
         for phase in 0..8 {
-            self.grid
+            let phase_impulses: Vec<Vec<ColliderImpulse>> = self
+                .grid
                 .particle_blocks
                 .par_iter()
                 .filter(|pb| pb.phase() == phase)
-                .for_each(|pb| {
+                .map(|pb| {
                     let mut arena = [F4::splat(0.0); ARENA_NODES];
+                    let colour_arena = colours.arena(pb);
+                    let mut block_impulses = Vec::new();
                     for p in pb.start..pb.end {
-                        let s = Stencil::new(self.grid.to_grid(&particles.position[p]));
+                        let x = particles.position[p];
+                        let s = Stencil::new(self.grid.to_grid(&x));
                         let m = particles.mass[p];
                         let momentum = particles.velocity[p] * m;
                         let q_cells = particles.stress[p] * (stress_scale * particles.volume[p])
                             + particles.affine[p] * (m * dx);
-                        scatter(&mut arena, &s, local_base(&s, pb), m, momentum, &q_cells);
+                        let base = local_base(&s, pb);
+                        let tags = particles.cpic_tags[p];
+                        match &colour_arena {
+                            Some(colour) if tags != 0 => {
+                                block_impulses.resize(colliders.len(), ColliderImpulse::default());
+                                let particle = CpicParticle {
+                                    x,
+                                    v: particles.velocity[p],
+                                    mass: m,
+                                    tags,
+                                };
+                                let cx = CpicTransfer {
+                                    colours: &colour[..],
+                                    colliders,
+                                    dx,
+                                };
+                                scatter_cpic(
+                                    &mut arena,
+                                    &cx,
+                                    &s,
+                                    base,
+                                    &particle,
+                                    &q_cells,
+                                    &mut block_impulses,
+                                );
+                            }
+                            _ => scatter(&mut arena, &s, base, m, momentum, &q_cells),
+                        }
                     }
                     for (a, slot) in slots.iter().enumerate() {
                         // SAFETY: blocks of one phase have disjoint arenas (see
@@ -334,34 +450,50 @@ impl Solver {
                         let node = &mut block[slot.node as usize];
                         *node = (F4::from_array(*node) + arena[a]).to_array();
                     }
-                });
+                    block_impulses
+                })
+                .filter(|i| !i.is_empty())
+                .collect();
+            for block in &phase_impulses {
+                impulses = add_impulses(impulses, block);
+            }
         }
+        impulses
     }
 
-    /// Grid update: velocity from momentum, gravity, then the walls.
-    fn update_grid(&mut self, dt: f32) {
+    /// Grid update: velocity from momentum, gravity, then the walls (and, for nodes coloured
+    /// for the plain grid-boundary method, the imposed collider velocity).
+    fn update_grid(&mut self, dt: f32, colliders: &[ColliderMotion]) {
         let gravity = self.settings.gravity * dt;
         let walls = self.settings.walls;
         let wall_max_node = self.wall_max_node;
         let coords = &self.grid.coords;
+        let colours = &self.colours;
+        let (origin, dx) = (self.grid.origin, self.grid.dx);
         self.grid
             .blocks
             .par_iter_mut()
             .zip(coords.par_iter())
-            .for_each(|(block, coord)| {
+            .enumerate()
+            .for_each(|(slot, (block, coord))| {
                 let first = coord.map(|c| c * BLOCK_EDGE);
                 let near_wall =
                     (0..3).any(|a| first[a] <= 0 || first[a] + BLOCK_EDGE > wall_max_node[a]);
+                let colour = colours.block(slot);
                 for (n, node) in block.iter_mut().enumerate() {
                     let mass = node[3];
                     if mass <= 0.0 {
                         continue;
                     }
                     let mut v = Vector3::new(node[0], node[1], node[2]) / mass + gravity;
+                    let local = [n / 16, (n / 4) % 4, n % 4];
+                    let index = [0, 1, 2].map(|a| first[a] + local[a] as i32);
                     if near_wall {
-                        let local = [n / 16, (n / 4) % 4, n % 4];
-                        let index = [0, 1, 2].map(|a| first[a] + local[a] as i32);
                         v = walls.apply_at_node(v, index, wall_max_node);
+                    }
+                    if let Some(imposed) = colour.map(|c| c[n].imposed).filter(|&i| i != 0) {
+                        let x = origin + Vector3::from(index.map(|i| i as f32)) * dx;
+                        v = colliders[imposed as usize - 1].velocity_at(&x);
                     }
                     node[0] = v.x;
                     node[1] = v.y;
@@ -372,9 +504,15 @@ impl Solver {
 
     /// G2P: gathers velocity and the affine matrix, updates F, advects, keeps particles in the
     /// domain, applies the constitutive update and checks every particle for blow-up.
-    fn grid_to_particle(&mut self, dt: f32) -> Result<(), SimError> {
+    fn grid_to_particle(
+        &mut self,
+        dt: f32,
+        colliders: &[ColliderMotion],
+    ) -> Result<Vec<ColliderImpulse>, SimError> {
         let context = G2pContext {
             grid: &self.grid,
+            colours: &self.colours,
+            colliders,
             slots: &self.arena_slots,
             materials: &self.materials,
             dt,
@@ -389,10 +527,12 @@ impl Solver {
             .into_par_iter()
             .zip(blocks.par_iter())
             .map(|(view, pb)| grid_to_particle_block(&context, view, pb))
-            .reduce(G2pSummary::default, G2pSummary::merge);
+            .collect::<Vec<_>>()
+            .into_iter()
+            .fold(G2pSummary::default(), G2pSummary::merge);
         self.max_speed_m_s = summary.max_speed_sq.sqrt();
         match summary.bad {
-            None => Ok(()),
+            None => Ok(summary.impulses),
             Some(bad) => Err(SimError::BlowUp {
                 step: self.steps,
                 time_s: self.time_s,
@@ -409,6 +549,8 @@ impl Solver {
 /// What G2P reads besides the particles.
 struct G2pContext<'a> {
     grid: &'a SparseGrid,
+    colours: &'a GridColours,
+    colliders: &'a [ColliderMotion],
     slots: &'a [ArenaSlot; ARENA_NODES],
     materials: &'a [SolverMaterial],
     /// Substep (s).
@@ -429,6 +571,8 @@ struct G2pContext<'a> {
 fn grid_to_particle_block(cx: &G2pContext, view: G2pView, pb: &ParticleBlock) -> G2pSummary {
     let G2pContext {
         grid,
+        colours,
+        colliders,
         slots,
         materials,
         dt,
@@ -444,6 +588,7 @@ fn grid_to_particle_block(cx: &G2pContext, view: G2pView, pb: &ParticleBlock) ->
         );
     }
     let mut summary = G2pSummary::default();
+    let colour_arena = colours.arena(pb);
     // Eight particles at a time: their constitutive updates share one 8-lane SVD.
     for chunk in (0..view.position.len()).step_by(LANES) {
         let lanes = (view.position.len() - chunk).min(LANES);
@@ -456,16 +601,60 @@ fn grid_to_particle_block(cx: &G2pContext, view: G2pView, pb: &ParticleBlock) ->
             let i = chunk + lane;
             let x = view.position[i];
             let s = Stencil::new(grid.to_grid(&x));
-            let (v, b) = gather(&arena, &s, local_base(&s, pb));
+            let base = local_base(&s, pb);
+            let tags = view.cpic_tags[i];
+            let near_collider = colour_arena.as_ref().filter(|_| tags != 0);
+            let particle = || CpicParticle {
+                x,
+                v: view.velocity[i],
+                mass: view.mass[i],
+                tags,
+            };
+            let (mut v, b) = match near_collider {
+                Some(colour) => {
+                    let cx = CpicTransfer {
+                        colours: &colour[..],
+                        colliders,
+                        dx,
+                    };
+                    gather_cpic(&arena, &cx, &s, base, &particle())
+                }
+                None => gather(&arena, &s, base),
+            };
             // C_p = (4/dx^2) sum w v_i (x_i - x_p)^T, with offsets in cells.
             let c = b * (4.0 / dx);
             f[lane] = view.deformation[i];
             step[lane] = c * dt;
             vc[lane] = view.volume_correction[i];
             frames[lane] = view.svd_frame[i];
-            view.position[i] = (x + v * dt).sup(&lo).inf(&hi);
+            let mut x_new = x + v * dt;
+            // Near a collider: plain PIC (no affine transfer) and the penalty push-back.
+            view.affine[i] = if near_collider.is_some() {
+                Matrix3::zeros()
+            } else {
+                c
+            };
+            if let Some(colour) = near_collider {
+                let cx = CpicTransfer {
+                    colours: &colour[..],
+                    colliders,
+                    dx,
+                };
+                if summary.impulses.is_empty() {
+                    summary.impulses = vec![ColliderImpulse::default(); colliders.len()];
+                }
+                push_back(
+                    &cx,
+                    &s,
+                    base,
+                    &particle(),
+                    &mut x_new,
+                    &mut v,
+                    &mut summary.impulses,
+                );
+            }
+            view.position[i] = x_new.sup(&lo).inf(&hi);
             view.velocity[i] = v;
-            view.affine[i] = c;
         }
         let material = view.material[chunk];
         let tau = if view.material[chunk..chunk + lanes]
@@ -516,6 +705,172 @@ fn grid_to_particle_block(cx: &G2pContext, view: G2pView, pb: &ParticleBlock) ->
 #[inline(always)]
 fn local_base(s: &Stencil, pb: &ParticleBlock) -> [usize; 3] {
     [0, 1, 2].map(|a| (s.base[a] - pb.coord[a] * BLOCK_EDGE) as usize)
+}
+
+/// CPIC colours of the grid blocks near colliders, for one substep.
+#[derive(Clone, Debug, Default)]
+struct GridColours {
+    /// Grid block slot -> index in `blocks`, or `NO_COLOUR`.
+    of_block: Vec<u32>,
+    blocks: Vec<ColourBlock>,
+}
+
+const NO_COLOUR: u32 = u32::MAX;
+
+impl GridColours {
+    fn clear(&mut self, grid_blocks: usize) {
+        self.of_block.clear();
+        self.of_block.resize(grid_blocks, NO_COLOUR);
+        self.blocks.clear();
+    }
+
+    /// Colours of grid block `slot`, if coloured.
+    fn block(&self, slot: usize) -> Option<&ColourBlock> {
+        match self.of_block.get(slot) {
+            Some(&c) if c != NO_COLOUR => Some(&self.blocks[c as usize]),
+            _ => None,
+        }
+    }
+
+    /// The 6x6x6 colour arena of a particle block, or None if none of its nodes is coloured.
+    fn arena(&self, pb: &ParticleBlock) -> Option<Box<[NodeColour; ARENA_NODES]>> {
+        if self.blocks.is_empty()
+            || pb
+                .arena_blocks
+                .iter()
+                .all(|&b| self.of_block[b as usize] == NO_COLOUR)
+        {
+            return None;
+        }
+        let mut arena = Box::new([NodeColour::default(); ARENA_NODES]);
+        for (a, slot) in arena_slots().iter().enumerate() {
+            let c = self.of_block[pb.arena_blocks[slot.block as usize] as usize];
+            if c != NO_COLOUR {
+                arena[a] = self.blocks[c as usize][slot.node as usize];
+            }
+        }
+        Some(arena)
+    }
+}
+
+/// `a + b`, collider by collider (the shorter one padded with zeros).
+fn add_impulses(mut a: Vec<ColliderImpulse>, b: &[ColliderImpulse]) -> Vec<ColliderImpulse> {
+    if a.len() < b.len() {
+        a.resize(b.len(), ColliderImpulse::default());
+    }
+    for (a, b) in a.iter_mut().zip(b) {
+        a.linear_n_s += b.linear_n_s;
+        a.angular_n_m_s += b.angular_n_m_s;
+    }
+    a
+}
+
+/// What the CPIC transfers of one particle block read besides the particle.
+struct CpicTransfer<'a> {
+    /// Colour arena of the block.
+    colours: &'a [NodeColour],
+    colliders: &'a [ColliderMotion],
+    /// Grid spacing (m).
+    dx: f32,
+}
+
+/// A particle as the CPIC transfers see it, at the start of the substep.
+struct CpicParticle {
+    x: Vector3<f32>,
+    v: Vector3<f32>,
+    mass: f32,
+    tags: u64,
+}
+
+/// [`scatter`] with CPIC: a node incompatible with the particle receives nothing; the collider
+/// of the conflict receives, at the node, the momentum the particle would have left there less
+/// what the ghost velocity gives back in G2P.
+#[inline(never)]
+fn scatter_cpic(
+    arena: &mut [F4; ARENA_NODES],
+    cx: &CpicTransfer,
+    s: &Stencil,
+    base: [usize; 3],
+    p: &CpicParticle,
+    q_cells: &Matrix3<f32>,
+    impulses: &mut [ColliderImpulse],
+) {
+    let momentum = p.v * p.mass;
+    for (a, w, d) in stencil_nodes(s, base) {
+        let contribution = (momentum + q_cells * d) * w;
+        let colour = &cx.colours[a];
+        let conflict = conflicts(colour.bits, p.tags);
+        if conflict == 0 {
+            let node = F4::from_array([contribution.x, contribution.y, contribution.z, w * p.mass]);
+            arena[a] = arena[a] + node;
+        } else {
+            let x_node = p.x + d * cx.dx;
+            let (r, normal) = conflict_normal(colour, conflict, p.tags);
+            let motion = &cx.colliders[r];
+            let ghost = ghost_velocity(p.v, &x_node, motion, normal);
+            impulses[r].add_at(
+                contribution - ghost * (w * p.mass),
+                &x_node,
+                &motion.centre_m,
+            );
+        }
+    }
+}
+
+/// [`gather`] with CPIC: an incompatible node contributes the ghost velocity instead of its own.
+#[inline(never)]
+fn gather_cpic(
+    arena: &[F4; ARENA_NODES],
+    cx: &CpicTransfer,
+    s: &Stencil,
+    base: [usize; 3],
+    p: &CpicParticle,
+) -> (Vector3<f32>, Matrix3<f32>) {
+    let (mut v, mut b) = (Vector3::zeros(), Matrix3::zeros());
+    for (a, w, d) in stencil_nodes(s, base) {
+        let colour = &cx.colours[a];
+        let conflict = conflicts(colour.bits, p.tags);
+        let v_node = if conflict == 0 {
+            let [x, y, z, _] = arena[a].to_array();
+            Vector3::new(x, y, z)
+        } else {
+            let (r, normal) = conflict_normal(colour, conflict, p.tags);
+            ghost_velocity(p.v, &(p.x + d * cx.dx), &cx.colliders[r], normal)
+        };
+        v += v_node * w;
+        b += v_node * w * d.transpose();
+    }
+    (v, b)
+}
+
+/// CPIC penalty: a particle that ended up between [`PENALTY_MIN_CELLS`] and
+/// [`PENALTY_MAX_CELLS`] on the wrong side of its closest collider is put back on the surface
+/// and loses its velocity into the collider; the collider receives the reaction.
+#[inline(never)]
+fn push_back(
+    cx: &CpicTransfer,
+    s: &Stencil,
+    base: [usize; 3],
+    p: &CpicParticle,
+    x_new: &mut Vector3<f32>,
+    v: &mut Vector3<f32>,
+    impulses: &mut [ColliderImpulse],
+) {
+    let Some((r, distance, normal)) = wall_distance(p.tags, cx.colours, s, base) else {
+        return;
+    };
+    let distance = distance + normal.dot(&(*x_new - p.x));
+    if distance >= -PENALTY_MIN_CELLS * cx.dx || distance <= -PENALTY_MAX_CELLS * cx.dx {
+        return;
+    }
+    *x_new -= normal * distance;
+    let motion = &cx.colliders[r];
+    let approach = (*v - motion.velocity_at(x_new)).dot(&normal);
+    if approach < 0.0 {
+        let dv = -approach * normal;
+        *v += dv;
+        impulses[r].add_at(-dv * p.mass, x_new, &motion.centre_m);
+    }
 }
 
 /// Adds one particle's mass and momentum `w_ip (m_p v_p + Q_p (x_i - x_p))` to its 27 arena
@@ -601,6 +956,8 @@ struct G2pView<'a> {
     stress: &'a mut [Matrix3<f32>],
     volume_correction: &'a mut [f32],
     svd_frame: &'a mut [Frame],
+    mass: &'a [f32],
+    cpic_tags: &'a [u64],
     material: &'a [MaterialId],
 }
 
@@ -614,6 +971,7 @@ impl<'a> G2pView<'a> {
         let mut volume_correction = split_runs(&mut p.volume_correction, blocks).into_iter();
         let mut svd_frame = split_runs(&mut p.svd_frame, blocks).into_iter();
         let material = &p.material[..];
+        let (mass, cpic_tags) = (&p.mass[..], &p.cpic_tags[..]);
         (0..blocks.len())
             .map(|b| G2pView {
                 position: position.next().unwrap(),
@@ -624,6 +982,8 @@ impl<'a> G2pView<'a> {
                 volume_correction: volume_correction.next().unwrap(),
                 svd_frame: svd_frame.next().unwrap(),
                 material: &material[blocks[b].start..blocks[b].end],
+                mass: &mass[blocks[b].start..blocks[b].end],
+                cpic_tags: &cpic_tags[blocks[b].start..blocks[b].end],
             })
             .collect()
     }
@@ -756,7 +1116,7 @@ mod tests {
         s.grid.rebuild(&s.keys);
         // Stress enters P2G but, being symmetric and summed against zero-mean offsets, adds no
         // net force or torque.
-        s.particle_to_grid(1e-4);
+        s.particle_to_grid(1e-4, &[]);
         let (m, p, l) = grid_totals(&s);
         let p_scale = s.particles.mass.iter().map(|&m| m as f64).sum::<f64>();
         assert!((m - m0).abs() < 1e-6 * m0, "mass {m} vs {m0}");
@@ -775,8 +1135,8 @@ mod tests {
         }
         s.sort_particles_by_block();
         s.grid.rebuild(&s.keys);
-        s.particle_to_grid(0.0);
-        s.update_grid(0.0);
+        s.particle_to_grid(0.0, &[]);
+        s.update_grid(0.0, &[]);
         // After the grid update the nodes hold velocities; weight them by mass.
         let (mut p_grid, mut l_grid) = (Vector3::zeros(), Vector3::zeros());
         for (block, coord) in s.grid.blocks.iter().zip(&s.grid.coords) {
@@ -790,7 +1150,7 @@ mod tests {
                 l_grid += x.cross(&mom);
             }
         }
-        s.grid_to_particle(0.0).unwrap();
+        s.grid_to_particle(0.0, &[]).unwrap();
         let scale = s.particles.total_mass();
         assert!(close(s.particles.total_momentum(), p_grid, scale));
         assert!(close(

@@ -229,6 +229,37 @@ impl LegParams {
         mesh
     }
 
+    /// The leg's mid-surface in the leg frame, for CPIC coupling (an open sheet with no
+    /// thickness): the centreline swept across the width (y in [-w/2, +w/2]), as a strip of
+    /// `segments` straight pieces along the arc, two triangles each. Station j (of
+    /// `segments + 1`) is centreline point u = j / segments; its vertices are 2j at y = -w/2
+    /// and 2j + 1 at y = +w/2 (m). Triangles are wound so that their right-hand-rule normal is
+    /// `y x tangent`, the centreline's [`ArcPoint::normal`]: the side [`LegParams::mesh`]
+    /// offsets by +thickness/2. That positive side is the convex (outer) side of a C-leg
+    /// (positive curvature; +z at the hip), the concave side of a reversed leg, and -x for a
+    /// straight leg.
+    pub fn mid_surface(&self, segments: usize) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+        let segments = segments.max(1);
+        let hw = 0.5 * self.width_m;
+        let mut vertices = Vec::with_capacity(2 * (segments + 1));
+        for j in 0..=segments {
+            let p = self.centreline(j as f64 / segments as f64).position_m;
+            for y in [-hw, hw] {
+                vertices.push([p[0] as f32, y as f32, p[2] as f32]);
+            }
+        }
+        let mut triangles = Vec::with_capacity(2 * segments);
+        for j in 0..segments {
+            // Station j at -y and +y, then station j + 1 at +y and -y: a -> b runs along +y
+            // and a -> d along the piece's chord, which is parallel to the tangent at the
+            // piece's middle, so both triangles' normals are y x tangent there.
+            let [a, b, c, d] = [2 * j, 2 * j + 1, 2 * j + 3, 2 * j + 2].map(|i| i as u32);
+            triangles.push([a, b, c]);
+            triangles.push([a, c, d]);
+        }
+        (vertices, triangles)
+    }
+
     /// Mass, centre of mass and inertia about the centre of mass in the leg frame, integrated
     /// over the exact curved slab (volume element `(1 + k n) ds dn dy`).
     pub fn mass_properties(&self) -> MassProperties {
@@ -694,6 +725,74 @@ mod tests {
         // The first box starts out along -x (the tangent at the hip of a C-leg).
         assert!(boxes[0].pitch_rad.cos() < -0.9);
         assert!(boxes.iter().map(|b| b.size_m[0]).sum::<f64>() > p.arc_length_m());
+    }
+
+    #[test]
+    fn mid_surface_is_the_swept_centreline_facing_the_thickness_offset() {
+        let segments = 24;
+        for k in [-1.0, 0.0, 0.6, 1.0] {
+            let p = leg(k);
+            let (vertices, triangles) = p.mid_surface(segments);
+            assert_eq!(vertices.len(), 2 * (segments + 1), "k {k}");
+            assert_eq!(triangles.len(), 2 * segments, "k {k}");
+            let vertices: Vec<[f64; 3]> = vertices.iter().map(|v| v.map(f64::from)).collect();
+            // Every vertex is a centreline point at y = -+w/2 (up to f32 rounding of ~4 cm).
+            for (i, v) in vertices.iter().enumerate() {
+                let c = p.centreline((i / 2) as f64 / segments as f64).position_m;
+                let y = if i % 2 == 0 { -0.5 } else { 0.5 } * p.width_m;
+                let err = [v[0] - c[0], v[1] - y, v[2] - c[2]];
+                assert!(
+                    err.iter().all(|e| e.abs() < 1e-8),
+                    "k {k} vertex {i}: {v:?}"
+                );
+            }
+            let mesh = p.mesh(segments);
+            for (t, tri) in triangles.iter().enumerate() {
+                let [a, b, c] = tri.map(|i| vertices[i as usize]);
+                let n = cross(sub(b, a), sub(c, a));
+                let piece = t / 2;
+                // The normal is the centreline normal at the piece's middle...
+                let want = p.centreline((piece as f64 + 0.5) / segments as f64).normal;
+                let cos = dot(n, want) / dot(n, n).sqrt();
+                assert!(cos > 0.999, "k {k} triangle {t}: cos {cos}");
+                // ... the side where `mesh` puts its +thickness/2 corners (corner 1 of each
+                // station)...
+                let station = p.centreline(piece as f64 / segments as f64).position_m;
+                assert!(dot(n, sub(mesh.vertices[4 * piece + 1], station)) > 0.0);
+                // ... which for a C-leg is the convex side, away from the arc's centre
+                // (0, 0, -R).
+                if k == 1.0 {
+                    assert!(dot(n, sub(a, [0.0, 0.0, -p.half_chord_m()])) > 0.0);
+                }
+            }
+            if k == 1.0 {
+                // On the C-leg all vertices lie on the circle of radius R about (0, 0, -R),
+                // and the first piece, at the hip, faces +z.
+                let r = p.half_chord_m();
+                for v in &vertices {
+                    let d = (v[0] * v[0] + (v[2] + r).powi(2)).sqrt();
+                    assert!((d - r).abs() < 1e-8, "{v:?}");
+                }
+                let [a, b, c] = triangles[0].map(|i| vertices[i as usize]);
+                assert!(cross(sub(b, a), sub(c, a))[2] > 0.0);
+            }
+        }
+    }
+
+    fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+        [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+    }
+
+    fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+        a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    }
+
+    fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
     }
 
     #[test]

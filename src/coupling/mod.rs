@@ -1,0 +1,300 @@
+//! Two-way coupling of the sand ([`crate::mpm`]) with rapier rigid bodies by CPIC
+//! (`docs/physics.md`, section 4; Hu et al. 2018).
+//!
+//! Per substep [`Coupling::substep`]: the solver sorts its particles and allocates its grid;
+//! every grid node within [`BAND_CELLS`] of a collider's surface gets its colour (affinity and
+//! side bits per collider, distance and normal to the closest one) from the collider's
+//! [`CpicSurface`] at the body's current pose; the solver's transfers respect the colours and
+//! return the impulse each collider received; two-way colliders get it as a force over the
+//! substep, to be applied by the rapier step of the same dt that the caller takes next.
+
+pub mod surface;
+
+use nalgebra::Vector3;
+use rapier3d::glamx::Vec3;
+use rapier3d::prelude::{Pose, RigidBodyHandle, RigidBodySet};
+use serde::{Deserialize, Serialize};
+
+use crate::mpm::cpic::{ColliderImpulse, ColliderMotion, ColourBlock, NodeColour, MAX_COLLIDERS};
+use crate::mpm::grid::{node_in_block, BLOCK_EDGE};
+use crate::mpm::{SimError, Solver};
+pub use surface::{CpicSurface, SurfaceSample};
+
+/// Half-width of the narrow band around each collider in which grid nodes are coloured, in grid
+/// cells: the reach of the quadratic B-spline stencil.
+pub const BAND_CELLS: f32 = 1.5;
+/// A collider surface may move at most this many grid cells per substep (the colours are
+/// computed once per substep at its start).
+pub const MAX_CELLS_PER_SUBSTEP: f32 = 0.1;
+
+/// How a collider takes part in the sand's dynamics.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CouplingMode {
+    /// The sand does not see it.
+    None,
+    /// The sand feels the body, the body not the sand (kinematic bodies, probes).
+    OneWay,
+    /// Both feel each other.
+    TwoWay,
+}
+
+/// How colliders act on the sand.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CouplingMethod {
+    /// Compatible particle-in-cell: thin colliders neither leak sand nor go unfelt.
+    Cpic,
+    /// The plain grid-boundary treatment, for comparison only: grid nodes inside a collider take
+    /// its velocity. Colliders thinner than a cell let sand through; no impulses are returned.
+    GridBoundary,
+}
+
+/// One rigid collider as the sand sees it.
+#[derive(Clone, Debug)]
+pub struct SandCollider {
+    /// For messages.
+    pub name: String,
+    /// The rapier body it moves with.
+    pub body: RigidBodyHandle,
+    /// Pose of the surface in the body's frame.
+    pub body_to_surface: Pose,
+    pub surface: CpicSurface,
+    /// Coulomb friction coefficient sand-on-collider (dimensionless).
+    pub friction: f32,
+    pub mode: CouplingMode,
+}
+
+/// Errors building a coupling.
+#[derive(thiserror::Error, Debug, Clone, PartialEq)]
+pub enum CouplingError {
+    #[error("{count} colliders are coupled to the sand; CPIC tells at most {MAX_COLLIDERS} apart")]
+    TooManyColliders { count: usize },
+    #[error("collider {name}: its body is not in the rapier world")]
+    MissingBody { name: String },
+}
+
+/// The colliders coupled to one sand solver.
+pub struct Coupling {
+    /// Colliders with a mode other than `None`, in colour-bit order.
+    colliders: Vec<SandCollider>,
+    method: CouplingMethod,
+}
+
+/// A collider at the start of a substep.
+struct Placed<'a> {
+    collider: &'a SandCollider,
+    /// World pose of the surface.
+    pose: Pose,
+    /// World bounding box of the surface grown by the band (m).
+    min: Vector3<f32>,
+    max: Vector3<f32>,
+}
+
+impl Coupling {
+    /// Couples the colliders whose mode is not `None`.
+    pub fn new(colliders: Vec<SandCollider>, bodies: &RigidBodySet) -> Result<Self, CouplingError> {
+        let colliders: Vec<SandCollider> = colliders
+            .into_iter()
+            .filter(|c| c.mode != CouplingMode::None)
+            .collect();
+        if colliders.len() > MAX_COLLIDERS {
+            return Err(CouplingError::TooManyColliders {
+                count: colliders.len(),
+            });
+        }
+        if let Some(c) = colliders.iter().find(|c| bodies.get(c.body).is_none()) {
+            return Err(CouplingError::MissingBody {
+                name: c.name.clone(),
+            });
+        }
+        Ok(Coupling {
+            colliders,
+            method: CouplingMethod::Cpic,
+        })
+    }
+
+    /// The same colliders acting by another method.
+    pub fn with_method(self, method: CouplingMethod) -> Self {
+        Coupling { method, ..self }
+    }
+
+    /// The coupled colliders, in colour-bit order (the order of the impulses).
+    pub fn colliders(&self) -> &[SandCollider] {
+        &self.colliders
+    }
+
+    /// Longest step (s) that keeps every collider surface within [`MAX_CELLS_PER_SUBSTEP`] of
+    /// where its colours were computed: `inf` for colliders at rest.
+    pub fn max_dt_s(&self, bodies: &RigidBodySet, dx: f32) -> f32 {
+        let fastest = self
+            .colliders
+            .iter()
+            .map(|c| {
+                let rb = &bodies[c.body];
+                let (min, max) = c.surface.local_aabb();
+                let half_diagonal = 0.5 * (Vec3::from(max) - Vec3::from(min)).length();
+                let centre_offset = (rb.position().transform_point(c.body_to_surface.translation)
+                    - rb.center_of_mass())
+                .length();
+                let reach = if half_diagonal.is_finite() {
+                    half_diagonal + centre_offset
+                } else {
+                    0.0
+                };
+                rb.linvel().length() + rb.angvel().length() * reach
+            })
+            .fold(0.0f32, f32::max);
+        MAX_CELLS_PER_SUBSTEP * dx / fastest
+    }
+
+    /// One coupled sand substep of `dt` seconds against the bodies' current poses and
+    /// velocities. Two-way bodies get the sand's impulse as a force and torque over `dt` (their
+    /// previous user forces are replaced), so the caller must step rapier by the same `dt` next.
+    /// Returns the impulse each coupled collider received (N s, N m s about its body's centre of
+    /// mass), one-way colliders included.
+    pub fn substep(
+        &self,
+        solver: &mut Solver,
+        bodies: &mut RigidBodySet,
+        dt: f32,
+    ) -> Result<Vec<ColliderImpulse>, SimError> {
+        solver.begin_substep();
+        let dx = solver.grid().dx;
+        let origin = solver.grid().origin;
+        let band = BAND_CELLS * dx;
+        let placed: Vec<Placed> = self
+            .colliders
+            .iter()
+            .map(|c| {
+                let pose = *bodies[c.body].position() * c.body_to_surface;
+                let (min, max) = world_aabb(&pose, c.surface.local_aabb());
+                Placed {
+                    collider: c,
+                    pose,
+                    min: min.add_scalar(-band),
+                    max: max.add_scalar(band),
+                }
+            })
+            .collect();
+        let method = self.method;
+        solver.colour_nodes(|block| colour_block(block, &placed, method, origin, dx, band));
+        let motions: Vec<ColliderMotion> = self
+            .colliders
+            .iter()
+            .map(|c| {
+                let rb = &bodies[c.body];
+                ColliderMotion {
+                    linear_m_s: to_na(rb.linvel()),
+                    angular_rad_s: to_na(rb.angvel()),
+                    centre_m: to_na(rb.center_of_mass()),
+                    friction: c.friction,
+                }
+            })
+            .collect();
+        let impulses = solver.finish_substep(dt, &motions)?;
+        self.hand_back(&impulses, bodies, dt);
+        Ok(impulses)
+    }
+
+    /// Applies the two-way colliders' impulses as forces and torques over `dt`, summed per body.
+    fn hand_back(&self, impulses: &[ColliderImpulse], bodies: &mut RigidBodySet, dt: f32) {
+        let two_way = || {
+            self.colliders
+                .iter()
+                .zip(impulses)
+                .filter(|(c, _)| c.mode == CouplingMode::TwoWay)
+        };
+        for (c, _) in two_way() {
+            let rb = &mut bodies[c.body];
+            rb.reset_forces(false);
+            rb.reset_torques(false);
+        }
+        for (c, j) in two_way() {
+            let rb = &mut bodies[c.body];
+            let to_force = |v: Vector3<f64>| Vec3::new(v.x as f32, v.y as f32, v.z as f32) / dt;
+            rb.add_force(to_force(j.linear_n_s), true);
+            rb.add_torque(to_force(j.angular_n_m_s), true);
+        }
+    }
+}
+
+/// Colours of the 64 nodes of grid block `block`, or None if no collider's band reaches them.
+fn colour_block(
+    block: [i32; 3],
+    placed: &[Placed],
+    method: CouplingMethod,
+    origin: Vector3<f32>,
+    dx: f32,
+    band: f32,
+) -> Option<ColourBlock> {
+    let first = Vector3::from(block.map(|b| (b * BLOCK_EDGE) as f32)) * dx + origin;
+    let last = first.add_scalar((BLOCK_EDGE - 1) as f32 * dx);
+    let near: Vec<(usize, &Placed)> = placed
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| (0..3).all(|a| p.min[a] <= last[a] && first[a] <= p.max[a]))
+        .collect();
+    if near.is_empty() {
+        return None;
+    }
+    let mut colours = [NodeColour::default(); BLOCK_EDGE.pow(3) as usize];
+    let mut any = false;
+    let edge = BLOCK_EDGE as usize;
+    for (x, y, z) in
+        (0..edge).flat_map(|x| (0..edge).flat_map(move |y| (0..edge).map(move |z| (x, y, z))))
+    {
+        let point = first + Vector3::new(x as f32, y as f32, z as f32) * dx;
+        let colour = &mut colours[node_in_block(x, y, z)];
+        let mut closest = f32::INFINITY;
+        for &(r, p) in &near {
+            let Some(s) = p.collider.surface.sample(&p.pose, point.into(), band) else {
+                continue;
+            };
+            if method == CouplingMethod::GridBoundary {
+                if s.signed_distance_m <= 0.0 {
+                    colour.imposed = r as u8 + 1;
+                    any = true;
+                }
+                continue;
+            }
+            if !s.affinity {
+                continue;
+            }
+            colour.set(r, s.positive_side);
+            if s.distance_m < closest {
+                closest = s.distance_m;
+                colour.closest = r as u8;
+                colour.signed_distance_m = s.signed_distance_m;
+                colour.normal = s.normal;
+            }
+            any = true;
+        }
+    }
+    any.then_some(colours)
+}
+
+/// World bounding box of a local box under `pose`.
+fn world_aabb(pose: &Pose, (min, max): ([f32; 3], [f32; 3])) -> (Vector3<f32>, Vector3<f32>) {
+    let mut lo = Vector3::repeat(f32::INFINITY);
+    let mut hi = Vector3::repeat(f32::NEG_INFINITY);
+    for corner in 0..8 {
+        let pick = |a: usize| if corner >> a & 1 == 0 { min[a] } else { max[a] };
+        let local = Vec3::new(pick(0), pick(1), pick(2));
+        let w = to_na(pose.transform_point(local));
+        lo = lo.inf(&w);
+        hi = hi.sup(&w);
+    }
+    // An unbounded local box (the half-space) stays unbounded.
+    for a in 0..3 {
+        if !min[a].is_finite() || !max[a].is_finite() || !lo[a].is_finite() || !hi[a].is_finite() {
+            lo[a] = f32::NEG_INFINITY;
+            hi[a] = f32::INFINITY;
+        }
+    }
+    (lo, hi)
+}
+
+fn to_na(v: Vec3) -> Vector3<f32> {
+    Vector3::new(v.x, v.y, v.z)
+}
