@@ -5,7 +5,10 @@ use std::path::Path;
 
 use nalgebra::Vector3;
 use rapier3d::glamx::Vec3;
-use rapier3d::prelude::{Pose, RigidBodyBuilder, RigidBodyHandle, RigidBodySet, SharedShape};
+use rapier3d::prelude::{
+    ColliderBuilder, PhysicsWorld, Pose, RigidBodyBuilder, RigidBodyHandle, RigidBodySet,
+    SharedShape,
+};
 use sandstep::coupling::{Coupling, CouplingMethod, CouplingMode, CpicSurface, SandCollider};
 use sandstep::mpm::Solver;
 use sandstep::scene::Scene;
@@ -268,6 +271,128 @@ fn plate_pressed_into_sand_resists_linearly_with_depth() {
     assert!(
         intercept.abs() < 0.3 * slope * mx,
         "intercept {intercept} N"
+    );
+}
+
+/// Sand bed `[0, 0.06]^2 x [0, depth]` in a domain 5 cm tall, with gravity.
+fn sand_bed(depth: f32) -> Solver {
+    solver(
+        [0.06, 0.06, 0.05],
+        [0.0, 0.0, -9.81],
+        &format!("[{{material: sand, box: {{min_m: [0, 0, 0], max_m: [0.06, 0.06, {depth}]}}}}]"),
+    )
+}
+
+/// Advances sand and a rapier world together, one rapier step per sand substep, to `until_s`.
+/// Returns the largest speed (m/s) of `body` seen after `watch_from_s`.
+fn run_world(
+    sand: &mut Solver,
+    coupling: &Coupling,
+    world: &mut PhysicsWorld,
+    until_s: f64,
+    body: RigidBodyHandle,
+    watch_from_s: f64,
+) -> f32 {
+    let mut fastest = 0.0f32;
+    while sand.time_s < until_s {
+        let dt = sand.next_dt().min(coupling.max_dt_s(&world.bodies, DX));
+        coupling.substep(sand, &mut world.bodies, dt).unwrap();
+        world.integration_parameters.dt = dt;
+        world.step();
+        if sand.time_s >= watch_from_s {
+            fastest = fastest.max(world.bodies[body].linvel().length());
+        }
+    }
+    fastest
+}
+
+fn world_with(
+    body: RigidBodyBuilder,
+    collider: ColliderBuilder,
+) -> (PhysicsWorld, RigidBodyHandle) {
+    let mut world = PhysicsWorld::new();
+    world.gravity = Vec3::new(0.0, 0.0, -9.81);
+    let (handle, _) = world.insert(body, collider);
+    (world, handle)
+}
+
+/// A steel ball (1 cm radius) dropped from 2 cm onto a sand bed sinks in and comes to rest.
+#[test]
+fn dropped_sphere_sinks_and_comes_to_rest() {
+    let depth = 0.03;
+    let mut sand = sand_bed(depth);
+    sand.advance_to(0.05).unwrap();
+    let radius = 0.01;
+    let (mut world, ball) = world_with(
+        RigidBodyBuilder::dynamic().translation(Vec3::new(0.03, 0.03, depth + radius + 0.02)),
+        ColliderBuilder::ball(radius).density(7800.0),
+    );
+    let surface = CpicSurface::Solid(SharedShape::ball(radius));
+    let coupling = Coupling::new(
+        vec![collider("ball", ball, surface, CouplingMode::TwoWay)],
+        &world.bodies,
+    )
+    .unwrap();
+    let impact_speed = run_world(&mut sand, &coupling, &mut world, 0.12, ball, 0.0);
+    // It bounces twice (this test sand is soft, E = 0.35 MPa) and is at rest by 0.4 s.
+    let late_speed = run_world(&mut sand, &coupling, &mut world, 0.5, ball, 0.4);
+    let z_end = world.bodies[ball].translation().z;
+    let sinkage = depth - (z_end - radius);
+    println!(
+        "ball: impact {impact_speed:.3} m/s, sinkage {:.1} mm, speed from 0.4 s on below \
+         {late_speed:.4} m/s",
+        sinkage * 1e3,
+    );
+    assert!(
+        impact_speed > 0.5,
+        "the ball must fall onto the sand ({impact_speed} m/s)"
+    );
+    assert!(sinkage > 0.001, "the ball must sink in ({sinkage} m)");
+    assert!(
+        z_end - radius > 0.005,
+        "the ball must not sink to the floor"
+    );
+    assert!(
+        late_speed < 0.02,
+        "the ball must come to rest (speed {late_speed} m/s)"
+    );
+}
+
+/// A 2 g plate resting on sand stays at rest: no jitter grows from the explicit exchange of
+/// impulses with a body this light.
+#[test]
+fn light_body_rests_on_sand_without_jitter() {
+    let depth = 0.02;
+    let mut sand = sand_bed(depth);
+    sand.advance_to(0.05).unwrap();
+    let half = [0.01, 0.01, 0.002];
+    let (mut world, plate) = world_with(
+        RigidBodyBuilder::dynamic().translation(Vec3::new(0.03, 0.03, depth + half[2])),
+        // 1.6 cm^3 at 1250 kg/m^3: 2 g.
+        ColliderBuilder::cuboid(half[0], half[1], half[2]).density(1250.0),
+    );
+    let mass = world.bodies[plate].mass();
+    assert!((mass - 0.002).abs() < 1e-4, "mass {mass} kg");
+    let surface = CpicSurface::Solid(SharedShape::cuboid(half[0], half[1], half[2]));
+    let coupling = Coupling::new(
+        vec![collider("plate", plate, surface, CouplingMode::TwoWay)],
+        &world.bodies,
+    )
+    .unwrap();
+    let early = run_world(&mut sand, &coupling, &mut world, 0.15, plate, 0.1);
+    let late = run_world(&mut sand, &coupling, &mut world, 0.3, plate, 0.25);
+    let spin = world.bodies[plate].angvel().length();
+    let z = world.bodies[plate].translation().z;
+    println!("2 g plate: speed <= {early:.4} m/s early, <= {late:.4} m/s late, spin {spin:.3} rad/s, z {z:.4} m");
+    assert!(late < 0.01, "the plate jitters at {late} m/s");
+    assert!(
+        late <= early.max(0.002),
+        "jitter grows: {early} -> {late} m/s"
+    );
+    assert!(spin < 1.0, "the plate spins at {spin} rad/s");
+    assert!(
+        (z - (depth + half[2])).abs() < 0.005,
+        "the plate sank or flew: z = {z} m"
     );
 }
 
