@@ -12,7 +12,7 @@ pub mod surface;
 
 use nalgebra::Vector3;
 use rapier3d::glamx::Vec3;
-use rapier3d::prelude::{Pose, RigidBodyHandle, RigidBodySet};
+use rapier3d::prelude::{ColliderSet, Pose, RigidBodyHandle, RigidBodySet};
 use serde::{Deserialize, Serialize};
 
 use crate::mpm::cpic::{ColliderImpulse, ColliderMotion, ColourBlock, NodeColour, MAX_COLLIDERS};
@@ -72,6 +72,8 @@ pub enum CouplingError {
     TooManyColliders { count: usize },
     #[error("collider {name}: its body is not in the rapier world")]
     MissingBody { name: String },
+    #[error("{name}: cannot make its sand surface: {message}")]
+    Surface { name: String, message: String },
 }
 
 /// The colliders coupled to one sand solver.
@@ -184,11 +186,21 @@ impl Coupling {
             .iter()
             .map(|c| {
                 let rb = &bodies[c.body];
+                let yields = c.mode == CouplingMode::TwoWay && rb.is_dynamic();
                 ColliderMotion {
                     linear_m_s: to_na(rb.linvel()),
                     angular_rad_s: to_na(rb.angvel()),
                     centre_m: to_na(rb.center_of_mass()),
                     friction: c.friction,
+                    mass_kg: if yields { rb.mass() } else { f32::INFINITY },
+                    inertia_kg_m2: if yields {
+                        rb.mass_properties()
+                            .local_mprops
+                            .principal_inertia()
+                            .min_element()
+                    } else {
+                        f32::INFINITY
+                    },
                 }
             })
             .collect();
@@ -217,6 +229,101 @@ impl Coupling {
             rb.add_torque(to_force(j.angular_n_m_s), true);
         }
     }
+}
+
+/// How the sand sees the colliders of one rapier body, each as `(pose in the body frame,
+/// surface)`: cuboids thinner than `thin_m` are parts the grid cannot resolve, so all of them
+/// together become one sheet through their mid-planes (they must form a chain, end to end, like
+/// a leg's collision boxes); every other collider is a solid of its own shape.
+pub fn body_surfaces(
+    body: RigidBodyHandle,
+    bodies: &RigidBodySet,
+    colliders: &ColliderSet,
+    thin_m: f32,
+) -> Result<Vec<(Pose, CpicSurface)>, String> {
+    let rb = bodies.get(body).ok_or("body not in the world")?;
+    let mut chain = Vec::new();
+    let mut surfaces = Vec::new();
+    for &handle in rb.colliders() {
+        let c = &colliders[handle];
+        let pose = c.position_wrt_parent().copied().unwrap_or(Pose::IDENTITY);
+        match c.shape().as_cuboid() {
+            Some(cuboid) if 2.0 * cuboid.half_extents.min_element() < thin_m => {
+                chain.push((pose, cuboid.half_extents));
+            }
+            _ => surfaces.push((pose, CpicSurface::Solid(c.shared_shape().clone()))),
+        }
+    }
+    if !chain.is_empty() {
+        surfaces.push((Pose::IDENTITY, box_chain_sheet(&chain)?));
+    }
+    Ok(surfaces)
+}
+
+/// One sheet through the mid-planes of thin boxes `(pose, half extents)` laid end to end, in
+/// order: a strip whose cross-lines sit at the chain's ends and halfway between neighbouring box
+/// ends. Each box's thinnest axis is its thickness; of the other two, the one closer to the
+/// line to its neighbour runs along the chain.
+pub fn box_chain_sheet(boxes: &[(Pose, Vec3)]) -> Result<CpicSurface, String> {
+    if boxes.is_empty() {
+        return Err("no boxes".into());
+    }
+    let centre = |i: usize| boxes[i].0.translation;
+    // Direction of the chain at box i: towards the next box (from the previous for the last).
+    let forward = |i: usize| match boxes.len() {
+        1 => None,
+        n if i + 1 < n => Some(centre(i + 1) - centre(i)),
+        _ => Some(centre(i) - centre(i - 1)),
+    };
+    // (centre, half-length vector pointing forward, half-width vector, all on one side)
+    let mut parts: Vec<(Vec3, Vec3, Vec3)> = Vec::with_capacity(boxes.len());
+    for (i, (pose, half)) in boxes.iter().enumerate() {
+        let h = half.to_array();
+        let mut order = [0, 1, 2];
+        order.sort_by(|&a, &b| h[a].total_cmp(&h[b]));
+        let axis = |k: usize| pose.rotation * Vec3::AXES[order[k]] * h[order[k]];
+        let dir = forward(i).unwrap_or(axis(2));
+        let (along, across) = if axis(2).dot(dir).abs() >= axis(1).dot(dir).abs() {
+            (axis(2), axis(1))
+        } else {
+            (axis(1), axis(2))
+        };
+        let along = if along.dot(dir) < 0.0 { -along } else { along };
+        let across = match parts.last() {
+            Some((_, _, previous)) if across.dot(*previous) < 0.0 => -across,
+            _ => across,
+        };
+        parts.push((pose.translation, along, across));
+    }
+    let (first, along, across) = parts[0];
+    let mut stations = vec![(first - along, across)];
+    for pair in parts.windows(2) {
+        let ((c0, l0, w0), (c1, l1, w1)) = (pair[0], pair[1]);
+        let (end, start) = (c0 + l0, c1 - l1);
+        if end.distance(start) > 0.5 * l0.length().min(l1.length()) {
+            return Err(format!(
+                "thin boxes do not form a chain: a box ends at {end:?} m, the next starts at \
+                 {start:?} m"
+            ));
+        }
+        stations.push(((end + start) * 0.5, (w0 + w1) * 0.5));
+    }
+    let (last, along, across) = parts[parts.len() - 1];
+    stations.push((last + along, across));
+    let mut vertices = Vec::with_capacity(2 * stations.len());
+    for (centre, across) in &stations {
+        vertices.push((*centre - *across).to_array());
+        vertices.push((*centre + *across).to_array());
+    }
+    let triangles = (0..stations.len() as u32 - 1)
+        .flat_map(|j| {
+            [
+                [2 * j, 2 * j + 2, 2 * j + 1],
+                [2 * j + 1, 2 * j + 2, 2 * j + 3],
+            ]
+        })
+        .collect();
+    CpicSurface::sheet(vertices, triangles)
 }
 
 /// Colours of the 64 nodes of grid block `block`, or None if no collider's band reaches them.

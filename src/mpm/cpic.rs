@@ -45,9 +45,52 @@ pub struct ColliderMotion {
     pub centre_m: Vector3<f32>,
     /// Coulomb friction coefficient between sand and the collider (dimensionless).
     pub friction: f32,
+    /// Mass that yields to the sand within a substep (kg): the body's own mass for two-way
+    /// colliders, `f32::INFINITY` for colliders that do not yield (one-way, kinematic).
+    pub mass_kg: f32,
+    /// Rotational inertia that yields to the sand (kg m^2): the body's smallest principal
+    /// moment about its centre of mass, `f32::INFINITY` for colliders that do not yield.
+    pub inertia_kg_m2: f32,
 }
 
 impl ColliderMotion {
+    /// The motion G2P uses after P2G: where a body of mass `m_b` meets sand of mass `M_s` and
+    /// momentum `P_s` at incompatible nodes (`p2g`), the two are given their common velocity
+    /// `v* = (m_b v_b + P_s) / (m_b + M_s)` (a perfectly inelastic exchange) instead of the
+    /// body's own; likewise the spin, `w* = (I_b w_b + L_s) / (I_b + I_s)` with the sand's
+    /// angular momentum `L_s` and inertia `I_s` about the body's centre. The ghost velocities
+    /// then move the sand at about the common motion, and the impulse the body receives changes
+    /// its motion by about the difference: never more than the relative motion, so a light body
+    /// (a 2 g leg) meeting much more sand stays stable in this explicit exchange. Heavy bodies
+    /// (`m_b >> M_s`) keep their own motion.
+    pub fn yielded(&self, p2g: Option<&ColliderImpulse>) -> ColliderMotion {
+        let Some(p2g) = p2g.filter(|p| p.sand_mass_kg > 0.0) else {
+            return *self;
+        };
+        let blend = |own: Vector3<f32>, inertia: f32, sand_momentum: Vector3<f64>, sand: f64| {
+            if !(inertia.is_finite() && inertia > 0.0) || sand <= 0.0 {
+                return own;
+            }
+            let i = inertia as f64;
+            ((own.cast::<f64>() * i + sand_momentum) / (i + sand)).cast::<f32>()
+        };
+        ColliderMotion {
+            linear_m_s: blend(
+                self.linear_m_s,
+                self.mass_kg,
+                p2g.linear_n_s,
+                p2g.sand_mass_kg,
+            ),
+            angular_rad_s: blend(
+                self.angular_rad_s,
+                self.inertia_kg_m2,
+                p2g.angular_n_m_s,
+                p2g.sand_inertia_kg_m2,
+            ),
+            ..*self
+        }
+    }
+
     /// Velocity of the collider's material point at `x` (m/s).
     #[inline]
     pub fn velocity_at(&self, x: &Vector3<f32>) -> Vector3<f32> {
@@ -89,6 +132,11 @@ pub struct ColliderImpulse {
     pub linear_n_s: Vector3<f64>,
     /// Angular impulse about the collider's centre (N m s).
     pub angular_n_m_s: Vector3<f64>,
+    /// Mass of sand (kg) that met the collider at incompatible nodes in P2G (weights times
+    /// particle masses): what the collider exchanged momentum with.
+    pub sand_mass_kg: f64,
+    /// Moment of inertia of that sand about the collider's centre (kg m^2).
+    pub sand_inertia_kg_m2: f64,
 }
 
 impl ColliderImpulse {

@@ -299,6 +299,14 @@ impl Solver {
         self.update_grid(dt, colliders);
         self.stage_times.grid_update += t.elapsed();
 
+        // Light bodies yield to the sand they meet within the substep (see `yielded`).
+        let colliders: Vec<ColliderMotion> = colliders
+            .iter()
+            .enumerate()
+            .map(|(r, c)| c.yielded(p2g_impulses.get(r)))
+            .collect();
+        let colliders = &colliders[..];
+
         let t = Instant::now();
         let result = self.grid_to_particle(dt, colliders);
         self.stage_times.g2p += t.elapsed();
@@ -617,7 +625,10 @@ fn grid_to_particle_block(cx: &G2pContext, view: G2pView, pb: &ParticleBlock) ->
                         colliders,
                         dx,
                     };
-                    gather_cpic(&arena, &cx, &s, base, &particle())
+                    if summary.impulses.is_empty() {
+                        summary.impulses = vec![ColliderImpulse::default(); colliders.len()];
+                    }
+                    gather_cpic(&arena, &cx, &s, base, &particle(), &mut summary.impulses)
                 }
                 None => gather(&arena, &s, base),
             };
@@ -640,9 +651,6 @@ fn grid_to_particle_block(cx: &G2pContext, view: G2pView, pb: &ParticleBlock) ->
                     colliders,
                     dx,
                 };
-                if summary.impulses.is_empty() {
-                    summary.impulses = vec![ColliderImpulse::default(); colliders.len()];
-                }
                 push_back(
                     &cx,
                     &s,
@@ -761,6 +769,8 @@ fn add_impulses(mut a: Vec<ColliderImpulse>, b: &[ColliderImpulse]) -> Vec<Colli
     for (a, b) in a.iter_mut().zip(b) {
         a.linear_n_s += b.linear_n_s;
         a.angular_n_m_s += b.angular_n_m_s;
+        a.sand_mass_kg += b.sand_mass_kg;
+        a.sand_inertia_kg_m2 += b.sand_inertia_kg_m2;
     }
     a
 }
@@ -804,15 +814,15 @@ fn scatter_cpic(
             let node = F4::from_array([contribution.x, contribution.y, contribution.z, w * p.mass]);
             arena[a] = arena[a] + node;
         } else {
+            // The collider takes what the node would have received; G2P subtracts what the
+            // ghost velocity gives back.
             let x_node = p.x + d * cx.dx;
-            let (r, normal) = conflict_normal(colour, conflict, p.tags);
-            let motion = &cx.colliders[r];
-            let ghost = ghost_velocity(p.v, &x_node, motion, normal);
-            impulses[r].add_at(
-                contribution - ghost * (w * p.mass),
-                &x_node,
-                &motion.centre_m,
-            );
+            let (r, _) = conflict_normal(colour, conflict, p.tags);
+            let centre = &cx.colliders[r].centre_m;
+            impulses[r].add_at(contribution, &x_node, centre);
+            impulses[r].sand_mass_kg += (w * p.mass) as f64;
+            impulses[r].sand_inertia_kg_m2 +=
+                (w * p.mass * (x_node - centre).norm_squared()) as f64;
         }
     }
 }
@@ -825,6 +835,7 @@ fn gather_cpic(
     s: &Stencil,
     base: [usize; 3],
     p: &CpicParticle,
+    impulses: &mut [ColliderImpulse],
 ) -> (Vector3<f32>, Matrix3<f32>) {
     let (mut v, mut b) = (Vector3::zeros(), Matrix3::zeros());
     for (a, w, d) in stencil_nodes(s, base) {
@@ -834,8 +845,12 @@ fn gather_cpic(
             let [x, y, z, _] = arena[a].to_array();
             Vector3::new(x, y, z)
         } else {
+            let x_node = p.x + d * cx.dx;
             let (r, normal) = conflict_normal(colour, conflict, p.tags);
-            ghost_velocity(p.v, &(p.x + d * cx.dx), &cx.colliders[r], normal)
+            let motion = &cx.colliders[r];
+            let ghost = ghost_velocity(p.v, &x_node, motion, normal);
+            impulses[r].add_at(-ghost * (w * p.mass), &x_node, &motion.centre_m);
+            ghost
         };
         v += v_node * w;
         b += v_node * w * d.transpose();

@@ -92,6 +92,10 @@ pub struct GroundConfig {
     /// and the robot's colliders, so the contact uses exactly this value. Default 0.5.
     #[serde(default = "default_friction")]
     pub friction: f64,
+    /// Height of the rigid ground plane (m). Default 0. The robot always starts just above
+    /// z = 0; on sand whose surface is at z = 0 this is the floor under the bed.
+    #[serde(default)]
+    pub height_m: f64,
 }
 
 /// Rigid-body integration settings.
@@ -192,6 +196,7 @@ impl Default for GroundConfig {
     fn default() -> Self {
         Self {
             friction: default_friction(),
+            height_m: 0.0,
         }
     }
 }
@@ -299,6 +304,14 @@ impl RobotConfig {
         }
 
         non_negative("ground.friction", self.ground.friction)?;
+        let height = self.ground.height_m;
+        if !(height.is_finite() && height <= 0.0) {
+            return Err(fail(
+                "ground.height_m",
+                height.to_string(),
+                "must be finite and <= 0 (the robot starts just above z = 0)",
+            ));
+        }
 
         let phys = &self.physics;
         positive("physics.max_dt_s", phys.max_dt_s)?;

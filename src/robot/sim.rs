@@ -196,7 +196,7 @@ impl RobotSim {
         };
         sim.place_at_phase_zero(pose.clearance_m);
         sim.world.insert(
-            RigidBodyBuilder::fixed(),
+            RigidBodyBuilder::fixed().translation(Vec3::new(0.0, 0.0, cfg.ground.height_m as f32)),
             ColliderBuilder::new(SharedShape::halfspace(Vector::Z))
                 .friction(friction)
                 .restitution(RESTITUTION),

@@ -26,12 +26,12 @@ pub fn validate(scene: &Scene) -> Result<(), SceneError> {
     }
     if let Some(robot) = &c.robot {
         robot.validate(&scene.file)?;
-        if c.sand.is_some() {
-            return Err(scene.invalid(
-                "robot",
-                "a robot on sand needs the sand-robot coupling, which is not built yet",
-            ));
-        }
+    }
+    if !(c.coupling.friction >= 0.0 && c.coupling.friction.is_finite()) {
+        return Err(scene.invalid(
+            "coupling.friction",
+            format!("{} must be a finite number >= 0", c.coupling.friction),
+        ));
     }
     let Some(sand) = scene.sand() else {
         return if c.column_collapse.is_some() {

@@ -24,6 +24,9 @@ pub struct SceneConfig {
     pub column_collapse: Option<ColumnCollapseConfig>,
     /// The hexapod (rigid bodies in rapier); on rigid ground when the scene has no sand.
     pub robot: Option<crate::robot::RobotConfig>,
+    /// How the robot and the sand act on each other (scenes with both). Default: CPIC, two-way.
+    #[serde(default)]
+    pub coupling: CouplingConfig,
     /// What the run writes besides its summary.
     #[serde(default)]
     pub output: OutputConfig,
@@ -300,6 +303,46 @@ pub struct ColumnCollapseConfig {
     /// Particles per cell (cube number). Default 8.
     #[serde(default = "default_ppc")]
     pub particles_per_cell: u32,
+}
+
+/// Sand-robot coupling (`docs/physics.md`, section 4).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CouplingConfig {
+    /// `cpic`, or `grid_boundary` (the plain method, which leaks through thin legs; for
+    /// comparison only). Default `cpic`.
+    #[serde(default = "default_method")]
+    pub method: crate::coupling::CouplingMethod,
+    /// How the legs take part: `none`, `one_way` or `two_way`. Default `two_way`.
+    #[serde(default = "default_mode")]
+    pub legs: crate::coupling::CouplingMode,
+    /// How the body (belly) takes part. Default `two_way`.
+    #[serde(default = "default_mode")]
+    pub body: crate::coupling::CouplingMode,
+    /// Coulomb friction coefficient sand-robot (-), legs and body. Default 0.4.
+    #[serde(default = "default_sand_friction")]
+    pub friction: f32,
+}
+
+fn default_method() -> crate::coupling::CouplingMethod {
+    crate::coupling::CouplingMethod::Cpic
+}
+fn default_mode() -> crate::coupling::CouplingMode {
+    crate::coupling::CouplingMode::TwoWay
+}
+fn default_sand_friction() -> f32 {
+    0.4
+}
+
+impl Default for CouplingConfig {
+    fn default() -> Self {
+        CouplingConfig {
+            method: default_method(),
+            legs: default_mode(),
+            body: default_mode(),
+            friction: default_sand_friction(),
+        }
+    }
 }
 
 /// Outputs of `sandstep run`.

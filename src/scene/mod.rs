@@ -4,6 +4,7 @@ pub mod build;
 pub mod config;
 mod overrides;
 pub mod ply;
+pub mod robot_sand;
 pub mod run;
 
 use std::path::{Path, PathBuf};

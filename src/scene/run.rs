@@ -53,14 +53,17 @@ pub enum RunError {
     Robot(#[from] RobotError),
     #[error("scene {0} has nothing to simulate (no `sand` or `robot` section)")]
     Empty(String),
+    #[error(transparent)]
+    Coupling(#[from] crate::coupling::CouplingError),
 }
 
 /// Runs a scene to its end and measures it.
 pub fn run_scene(scene: &Scene, opts: &RunOptions) -> Result<RunSummary, RunError> {
-    if scene.config.sand.is_none() {
-        if let Some(robot) = &scene.config.robot {
-            return run_robot_on_ground(scene, robot, opts);
-        }
+    if let Some(robot) = &scene.config.robot {
+        return match scene.config.sand {
+            None => run_robot_on_ground(scene, robot, opts),
+            Some(_) => super::robot_sand::run_robot_on_sand(scene, robot, opts),
+        };
     }
     let config = &scene.config;
     let mut solver = scene
@@ -128,12 +131,7 @@ pub fn run_scene(scene: &Scene, opts: &RunOptions) -> Result<RunSummary, RunErro
         );
     }
     metrics.insert("total_mass_kg".into(), json!(solver.particles.total_mass()));
-    let stage_times_s = solver
-        .stage_times
-        .named()
-        .iter()
-        .map(|(name, t)| (name.to_string(), json!(t.as_secs_f64())))
-        .collect();
+    let stage_times_s = stage_times_json(&solver);
     Ok(RunSummary {
         scene: config.name.clone(),
         steps: solver.steps,
@@ -207,7 +205,17 @@ fn write_snapshot(dir: &std::path::Path, frame: u64, solver: &Solver) -> Result<
         .map_err(|source| RunError::Write { path, source })
 }
 
-fn progress_bar(visible: bool, duration_s: f64) -> ProgressBar {
+/// Wall time of each solver stage (s), by name.
+pub(super) fn stage_times_json(solver: &Solver) -> Map<String, Value> {
+    solver
+        .stage_times
+        .named()
+        .iter()
+        .map(|(name, t)| (name.to_string(), json!(t.as_secs_f64())))
+        .collect()
+}
+
+pub(super) fn progress_bar(visible: bool, duration_s: f64) -> ProgressBar {
     let bar = ProgressBar::with_draw_target(
         Some((duration_s * 1000.0) as u64),
         if visible {
