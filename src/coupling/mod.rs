@@ -136,9 +136,9 @@ impl Coupling {
                 let rb = &bodies[c.body];
                 let (min, max) = c.surface.local_aabb();
                 let half_diagonal = 0.5 * (Vec3::from(max) - Vec3::from(min)).length();
-                let centre_offset = (rb.position().transform_point(c.body_to_surface.translation)
-                    - rb.center_of_mass())
-                .length();
+                let box_centre = (*rb.position() * c.body_to_surface)
+                    .transform_point((Vec3::from(min) + Vec3::from(max)) * 0.5);
+                let centre_offset = (box_centre - rb.center_of_mass()).length();
                 let reach = if half_diagonal.is_finite() {
                     half_diagonal + centre_offset
                 } else {

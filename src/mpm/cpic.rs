@@ -17,7 +17,7 @@
 //! - a particle found slightly on the wrong side is pushed back, its inward relative velocity
 //!   removed, and the reaction goes to the collider.
 
-use nalgebra::Vector3;
+use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
 use super::boundary::friction_project;
 use super::grid::{node_in_arena, BLOCK_NODES};
@@ -49,44 +49,59 @@ pub struct ColliderMotion {
     /// colliders, `f32::INFINITY` for colliders that do not yield (one-way, kinematic).
     pub mass_kg: f32,
     /// Rotational inertia that yields to the sand (kg m^2): the body's smallest principal
-    /// moment about its centre of mass, `f32::INFINITY` for colliders that do not yield.
+    /// moment about its centre of mass, `f32::INFINITY` for colliders that do not yield
+    /// (either infinite mass or infinite inertia means no yield at all).
     pub inertia_kg_m2: f32,
 }
 
 impl ColliderMotion {
-    /// The motion G2P uses after P2G: where a body of mass `m_b` meets sand of mass `M_s` and
-    /// momentum `P_s` at incompatible nodes (`p2g`), the two are given their common velocity
-    /// `v* = (m_b v_b + P_s) / (m_b + M_s)` (a perfectly inelastic exchange) instead of the
-    /// body's own; likewise the spin, `w* = (I_b w_b + L_s) / (I_b + I_s)` with the sand's
-    /// angular momentum `L_s` and inertia `I_s` about the body's centre. The ghost velocities
-    /// then move the sand at about the common motion, and the impulse the body receives changes
-    /// its motion by about the difference: never more than the relative motion, so a light body
-    /// (a 2 g leg) meeting much more sand stays stable in this explicit exchange. Heavy bodies
-    /// (`m_b >> M_s`) keep their own motion.
+    /// The motion G2P uses after P2G: a body of mass `m_b` and inertia `I_b` meets, at
+    /// incompatible nodes (`p2g`), sand of mass `M_s`, first moment `S = sum w m r`, inertia
+    /// tensor `I_s = sum w m (|r|^2 1 - r r^T)`, momentum `P_s` and angular momentum `L_s` (all
+    /// about the body's centre). Body and sand are given the one rigid motion `(v*, w*)` that
+    /// keeps their total momentum and angular momentum (a perfectly inelastic exchange):
+    ///
+    /// ```text
+    /// (m_b + M_s) v* - [S]x w*       = m_b v_b + P_s
+    /// [S]x v*        + (I_b + I_s) w* = I_b w_b + L_s
+    /// ```
+    ///
+    /// The ghost velocities then move the sand with that motion, and the impulse the body
+    /// receives changes its motion by about `(v* - v_b, w* - w_b)`: never more than the relative
+    /// motion, so a light body (a 2 g leg) meeting much more sand stays stable in this explicit
+    /// exchange. Heavy bodies keep their own motion. `I_b` is isotropic (the body's smallest
+    /// principal moment), which errs on the yielding side.
     pub fn yielded(&self, p2g: Option<&ColliderImpulse>) -> ColliderMotion {
-        let Some(p2g) = p2g.filter(|p| p.sand_mass_kg > 0.0) else {
+        let yields = self.mass_kg.is_finite()
+            && self.mass_kg > 0.0
+            && self.inertia_kg_m2.is_finite()
+            && self.inertia_kg_m2 > 0.0;
+        let Some(p2g) = p2g.filter(|p| yields && p.sand_mass_kg > 0.0) else {
             return *self;
         };
-        let blend = |own: Vector3<f32>, inertia: f32, sand_momentum: Vector3<f64>, sand: f64| {
-            if !(inertia.is_finite() && inertia > 0.0) || sand <= 0.0 {
-                return own;
-            }
-            let i = inertia as f64;
-            ((own.cast::<f64>() * i + sand_momentum) / (i + sand)).cast::<f32>()
+        let (m_b, i_b) = (self.mass_kg as f64, self.inertia_kg_m2 as f64);
+        let s_cross = p2g.sand_first_moment.cross_matrix();
+        let mut system = Matrix6::<f64>::zeros();
+        system
+            .fixed_view_mut::<3, 3>(0, 0)
+            .copy_from(&(Matrix3::identity() * (m_b + p2g.sand_mass_kg)));
+        system.fixed_view_mut::<3, 3>(0, 3).copy_from(&-s_cross);
+        system.fixed_view_mut::<3, 3>(3, 0).copy_from(&s_cross);
+        system
+            .fixed_view_mut::<3, 3>(3, 3)
+            .copy_from(&(Matrix3::identity() * i_b + p2g.sand_inertia));
+        let momentum = self.linear_m_s.cast::<f64>() * m_b + p2g.linear_n_s;
+        let angular = self.angular_rad_s.cast::<f64>() * i_b + p2g.angular_n_m_s;
+        let rhs = Vector6::new(
+            momentum.x, momentum.y, momentum.z, angular.x, angular.y, angular.z,
+        );
+        // The system is a rigid-body mass matrix: symmetric positive definite.
+        let Some(motion) = system.cholesky().map(|c| c.solve(&rhs)) else {
+            return *self;
         };
         ColliderMotion {
-            linear_m_s: blend(
-                self.linear_m_s,
-                self.mass_kg,
-                p2g.linear_n_s,
-                p2g.sand_mass_kg,
-            ),
-            angular_rad_s: blend(
-                self.angular_rad_s,
-                self.inertia_kg_m2,
-                p2g.angular_n_m_s,
-                p2g.sand_inertia_kg_m2,
-            ),
+            linear_m_s: motion.fixed_rows::<3>(0).into_owned().cast::<f32>(),
+            angular_rad_s: motion.fixed_rows::<3>(3).into_owned().cast::<f32>(),
             ..*self
         }
     }
@@ -135,8 +150,11 @@ pub struct ColliderImpulse {
     /// Mass of sand (kg) that met the collider at incompatible nodes in P2G (weights times
     /// particle masses): what the collider exchanged momentum with.
     pub sand_mass_kg: f64,
-    /// Moment of inertia of that sand about the collider's centre (kg m^2).
-    pub sand_inertia_kg_m2: f64,
+    /// First moment `sum w m r` of that sand about the collider's centre (kg m).
+    pub sand_first_moment: Vector3<f64>,
+    /// Inertia tensor `sum w m (|r|^2 1 - r r^T)` of that sand about the collider's centre
+    /// (kg m^2).
+    pub sand_inertia: Matrix3<f64>,
 }
 
 impl ColliderImpulse {
@@ -313,6 +331,56 @@ mod tests {
         let mut high = NodeColour::default();
         high.set(31, true);
         assert!(!compatible(high.bits, affinity_bit(31)));
+    }
+
+    /// Sand at an offset moving with a translating light body: the common motion is that
+    /// translation, with no spin (the linear and angular parts share one rigid motion).
+    #[test]
+    fn yield_is_one_rigid_motion() {
+        let v = Vector3::new(0.3, 0.0, 0.0);
+        let body = ColliderMotion {
+            linear_m_s: v,
+            angular_rad_s: Vector3::zeros(),
+            centre_m: Vector3::zeros(),
+            friction: 0.3,
+            mass_kg: 0.002,
+            inertia_kg_m2: 2e-8,
+        };
+        // 20 g of sand, 1 cm above the centre, moving at v.
+        let (m, r) = (0.02f64, Vector3::new(0.0, 0.0, 0.01f64));
+        let p = v.cast::<f64>() * m;
+        let sand = ColliderImpulse {
+            linear_n_s: p,
+            angular_n_m_s: r.cross(&p),
+            sand_mass_kg: m,
+            sand_first_moment: r * m,
+            sand_inertia: (Matrix3::identity() * r.norm_squared() - r * r.transpose()) * m,
+        };
+        let y = body.yielded(Some(&sand));
+        assert!((y.linear_m_s - v).norm() < 1e-6, "{}", y.linear_m_s);
+        assert!(y.angular_rad_s.norm() < 1e-4, "{}", y.angular_rad_s);
+        // Sand at rest: the common motion keeps momentum and angular momentum.
+        let still = ColliderImpulse {
+            linear_n_s: Vector3::zeros(),
+            angular_n_m_s: Vector3::zeros(),
+            ..sand
+        };
+        let y = body.yielded(Some(&still));
+        let (v_s, w_s) = (y.linear_m_s.cast::<f64>(), y.angular_rad_s.cast::<f64>());
+        let momentum = v_s * (0.002 + m) - r.cross(&w_s) * m;
+        assert!(
+            (momentum - v.cast::<f64>() * 0.002).norm() < 1e-9,
+            "{momentum}"
+        );
+        let angular = w_s * 2e-8 + (r * m).cross(&v_s) + still.sand_inertia * w_s;
+        assert!(angular.norm() < 1e-9, "{angular}");
+        assert!(y.linear_m_s.norm() < v.norm(), "the light body slows down");
+        // A body that does not yield keeps its motion.
+        let heavy = ColliderMotion {
+            mass_kg: f32::INFINITY,
+            ..body
+        };
+        assert_eq!(heavy.yielded(Some(&sand)), heavy);
     }
 
     #[test]

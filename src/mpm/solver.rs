@@ -770,7 +770,8 @@ fn add_impulses(mut a: Vec<ColliderImpulse>, b: &[ColliderImpulse]) -> Vec<Colli
         a.linear_n_s += b.linear_n_s;
         a.angular_n_m_s += b.angular_n_m_s;
         a.sand_mass_kg += b.sand_mass_kg;
-        a.sand_inertia_kg_m2 += b.sand_inertia_kg_m2;
+        a.sand_first_moment += b.sand_first_moment;
+        a.sand_inertia += b.sand_inertia;
     }
     a
 }
@@ -821,8 +822,10 @@ fn scatter_cpic(
             let centre = &cx.colliders[r].centre_m;
             impulses[r].add_at(contribution, &x_node, centre);
             impulses[r].sand_mass_kg += (w * p.mass) as f64;
-            impulses[r].sand_inertia_kg_m2 +=
-                (w * p.mass * (x_node - centre).norm_squared()) as f64;
+            let (m, arm) = ((w * p.mass) as f64, (x_node - centre).cast::<f64>());
+            impulses[r].sand_first_moment += arm * m;
+            impulses[r].sand_inertia +=
+                (Matrix3::identity() * arm.norm_squared() - arm * arm.transpose()) * m;
         }
     }
 }
