@@ -326,6 +326,7 @@ impl Solver {
         }
         let grid = &self.grid;
         let colours = &self.colours;
+        let slots = &self.arena_slots;
         let positions = &self.particles.position;
         let blocks = &grid.particle_blocks;
         let runs = split_runs(&mut self.particles.cpic_tags, blocks);
@@ -333,7 +334,7 @@ impl Solver {
             .into_par_iter()
             .zip(blocks.par_iter())
             .map(|(tags, pb)| {
-                let Some(arena) = colours.arena(pb) else {
+                let Some(arena) = colours.arena(pb, slots) else {
                     tags.fill(0);
                     return false;
                 };
@@ -412,7 +413,7 @@ impl Solver {
                 .filter(|pb| pb.phase() == phase)
                 .map(|pb| {
                     let mut arena = [F4::splat(0.0); ARENA_NODES];
-                    let colour_arena = colours.arena(pb);
+                    let colour_arena = colours.arena(pb, slots);
                     let mut block_impulses = Vec::new();
                     for p in pb.start..pb.end {
                         let x = particles.position[p];
@@ -494,13 +495,15 @@ impl Solver {
                         continue;
                     }
                     let mut v = Vector3::new(node[0], node[1], node[2]) / mass + gravity;
-                    let local = [n / 16, (n / 4) % 4, n % 4];
-                    let index = [0, 1, 2].map(|a| first[a] + local[a] as i32);
+                    let index = || {
+                        let local = [n / 16, (n / 4) % 4, n % 4];
+                        [0, 1, 2].map(|a| first[a] + local[a] as i32)
+                    };
                     if near_wall {
-                        v = walls.apply_at_node(v, index, wall_max_node);
+                        v = walls.apply_at_node(v, index(), wall_max_node);
                     }
                     if let Some(imposed) = colour.map(|c| c[n].imposed).filter(|&i| i != 0) {
-                        let x = origin + Vector3::from(index.map(|i| i as f32)) * dx;
+                        let x = origin + Vector3::from(index().map(|i| i as f32)) * dx;
                         v = colliders[imposed as usize - 1].velocity_at(&x);
                     }
                     node[0] = v.x;
@@ -596,7 +599,7 @@ fn grid_to_particle_block(cx: &G2pContext, view: G2pView, pb: &ParticleBlock) ->
         );
     }
     let mut summary = G2pSummary::default();
-    let colour_arena = colours.arena(pb);
+    let colour_arena = colours.arena(pb, slots);
     // Eight particles at a time: their constitutive updates share one 8-lane SVD.
     for chunk in (0..view.position.len()).step_by(LANES) {
         let lanes = (view.position.len() - chunk).min(LANES);
@@ -741,7 +744,11 @@ impl GridColours {
     }
 
     /// The 6x6x6 colour arena of a particle block, or None if none of its nodes is coloured.
-    fn arena(&self, pb: &ParticleBlock) -> Option<Box<[NodeColour; ARENA_NODES]>> {
+    fn arena(
+        &self,
+        pb: &ParticleBlock,
+        slots: &[ArenaSlot; ARENA_NODES],
+    ) -> Option<Box<[NodeColour; ARENA_NODES]>> {
         if self.blocks.is_empty()
             || pb
                 .arena_blocks
@@ -751,7 +758,7 @@ impl GridColours {
             return None;
         }
         let mut arena = Box::new([NodeColour::default(); ARENA_NODES]);
-        for (a, slot) in arena_slots().iter().enumerate() {
+        for (a, slot) in slots.iter().enumerate() {
             let c = self.of_block[pb.arena_blocks[slot.block as usize] as usize];
             if c != NO_COLOUR {
                 arena[a] = self.blocks[c as usize][slot.node as usize];

@@ -3,10 +3,10 @@
 
 use std::time::Instant;
 
-use serde_json::{json, Map, Value};
+use serde_json::json;
 
 use super::config::CouplingConfig;
-use super::run::{progress_bar, stage_times_json, RunError, RunOptions, RunSummary};
+use super::run::{progress_bar, robot_metrics_json, RunError, RunOptions, RunSummary};
 use super::Scene;
 use crate::coupling::{body_surfaces, Coupling, CouplingError, SandCollider};
 use crate::robot::geometry::LEGS;
@@ -111,23 +111,16 @@ pub(super) fn run_robot_on_sand(
     bar.finish_and_clear();
     let wall_time_s = wall.elapsed().as_secs_f64();
 
-    let mut metrics = match serde_json::to_value(robot.metrics()).expect("plain data") {
-        Value::Object(map) => map,
-        _ => Map::new(),
-    };
+    let mut metrics = robot_metrics_json(&robot);
     metrics.insert("mean_sinkage_m".into(), json!(sinkage_sum / frames as f64));
     metrics.insert("sand_mass_kg".into(), json!(solver.particles.total_mass()));
     metrics.insert("robot_mass_kg".into(), json!(robot.total_mass_kg()));
     metrics.insert("dx_m".into(), json!(dx));
-    Ok(RunSummary {
-        scene: config.name.clone(),
-        steps: solver.steps,
-        sim_time_s: solver.time_s,
+    Ok(RunSummary::of_solver(
+        &config.name,
+        &solver,
         wall_time_s,
-        particles: solver.particles.len(),
-        particle_steps_per_s: particle_steps as f64 / wall_time_s.max(1e-9),
-        wall_time_per_sim_s: wall_time_s / solver.time_s.max(1e-12),
-        stage_times_s: stage_times_json(&solver),
+        particle_steps,
         metrics,
-    })
+    ))
 }

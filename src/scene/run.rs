@@ -131,18 +131,13 @@ pub fn run_scene(scene: &Scene, opts: &RunOptions) -> Result<RunSummary, RunErro
         );
     }
     metrics.insert("total_mass_kg".into(), json!(solver.particles.total_mass()));
-    let stage_times_s = stage_times_json(&solver);
-    Ok(RunSummary {
-        scene: config.name.clone(),
-        steps: solver.steps,
-        sim_time_s: solver.time_s,
+    Ok(RunSummary::of_solver(
+        &config.name,
+        &solver,
         wall_time_s,
-        particles: solver.particles.len(),
-        particle_steps_per_s: particle_steps as f64 / wall_time_s.max(1e-9),
-        wall_time_per_sim_s: wall_time_s / solver.time_s.max(1e-12),
-        stage_times_s,
+        particle_steps,
         metrics,
-    })
+    ))
 }
 
 /// The robot alone on rigid ground (rapier only).
@@ -169,10 +164,7 @@ fn run_robot_on_ground(
     }
     bar.finish_and_clear();
     let wall_time_s = wall.elapsed().as_secs_f64();
-    let metrics = match serde_json::to_value(sim.metrics()).expect("plain data") {
-        Value::Object(map) => map,
-        _ => unreachable!("metrics serialise as a map"),
-    };
+    let metrics = robot_metrics_json(&sim);
     Ok(RunSummary {
         scene: config.name.clone(),
         steps,
@@ -205,14 +197,40 @@ fn write_snapshot(dir: &std::path::Path, frame: u64, solver: &Solver) -> Result<
         .map_err(|source| RunError::Write { path, source })
 }
 
-/// Wall time of each solver stage (s), by name.
-pub(super) fn stage_times_json(solver: &Solver) -> Map<String, Value> {
-    solver
-        .stage_times
-        .named()
-        .iter()
-        .map(|(name, t)| (name.to_string(), json!(t.as_secs_f64())))
-        .collect()
+impl RunSummary {
+    /// The summary of a run of `solver` that took `particle_steps` particle-steps.
+    pub(super) fn of_solver(
+        scene: &str,
+        solver: &Solver,
+        wall_time_s: f64,
+        particle_steps: u64,
+        metrics: Map<String, Value>,
+    ) -> Self {
+        RunSummary {
+            scene: scene.to_string(),
+            steps: solver.steps,
+            sim_time_s: solver.time_s,
+            wall_time_s,
+            particles: solver.particles.len(),
+            particle_steps_per_s: particle_steps as f64 / wall_time_s.max(1e-9),
+            wall_time_per_sim_s: wall_time_s / solver.time_s.max(1e-12),
+            stage_times_s: solver
+                .stage_times
+                .named()
+                .iter()
+                .map(|(name, t)| (name.to_string(), json!(t.as_secs_f64())))
+                .collect(),
+            metrics,
+        }
+    }
+}
+
+/// The robot's metrics as a JSON map.
+pub(super) fn robot_metrics_json(robot: &RobotSim) -> Map<String, Value> {
+    match serde_json::to_value(robot.metrics()).expect("plain data") {
+        Value::Object(map) => map,
+        _ => unreachable!("metrics serialise as a map"),
+    }
 }
 
 pub(super) fn progress_bar(visible: bool, duration_s: f64) -> ProgressBar {
