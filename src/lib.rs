@@ -5,8 +5,11 @@
 //! running them); [`analysis`] measures runs and [`bench`] prints throughput figures.
 
 pub mod analysis;
+pub mod bag;
 pub mod bench;
 pub mod coupling;
 pub mod mpm;
+pub mod msgs;
 pub mod robot;
+pub mod ros;
 pub mod scene;

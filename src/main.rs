@@ -2,11 +2,13 @@
 
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 
-use sandstep::scene::{run_scene, RunOptions, Scene};
+use sandstep::scene::{run_scene, run_scene_observed, RunOptions, Scene};
 
 #[derive(Parser)]
 #[command(
@@ -40,9 +42,44 @@ enum Command {
         /// Print one JSON object on stdout instead of the human summary.
         #[arg(long)]
         json: bool,
+        #[command(flatten)]
+        bag: BagArgs,
+    },
+    /// Run a scene as a ROS 2 node (default: the robot on sand) until stopped or --duration.
+    Node {
+        /// Scene file (YAML); default config/robot_on_sand.yaml.
+        scene: Option<PathBuf>,
+        /// Stop after this much simulated time (s); default: run until Ctrl-C or SIGTERM.
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Pace the simulation to the wall clock and report the real-time factor reached.
+        #[arg(long)]
+        realtime: bool,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Change one scene or node value, e.g. --set node.name=sand1 (repeatable).
+        #[arg(long = "set", value_name = "KEY.PATH=VALUE")]
+        overrides: Vec<String>,
+        /// Print one JSON summary on stdout at the end.
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        bag: BagArgs,
     },
     /// Write a hexapod URDF (and its leg meshes) from leg and body parameters.
     Urdf(sandstep::robot::UrdfArgs),
+    /// Summarise a recorded bag: distance, speed per gait cycle, sinkage, leg forces, commands.
+    Analyze {
+        /// Bag directory (rosbag2, MCAP) or a bare .mcap file.
+        bag: PathBuf,
+        /// Write trajectory, speed, joint-angle and leg-force plots (PNG and SVG) into DIR.
+        #[arg(long, value_name = "DIR")]
+        plots: Option<PathBuf>,
+        /// Print one JSON object on stdout instead of the human summary.
+        #[arg(long)]
+        json: bool,
+    },
     /// Measure solver throughput on a 3D sand block collapsing under gravity.
     Bench {
         /// Number of particles (8 per cell).
@@ -58,6 +95,49 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+}
+
+/// Where a run records its bag.
+#[derive(clap::Args)]
+struct BagArgs {
+    /// Bag directory to create (default bags/<scene>-<YYYYmmdd-HHMMSS>).
+    #[arg(long = "bag", value_name = "DIR", conflicts_with = "no_bag")]
+    dir: Option<PathBuf>,
+    /// Do not record a bag.
+    #[arg(long)]
+    no_bag: bool,
+}
+
+/// Parent of the default bag directories.
+const DEFAULT_BAG_PARENT: &str = "bags";
+/// The scene `sandstep node` runs without one: in the working directory, else in the source
+/// tree the binary was built from.
+const DEFAULT_NODE_SCENE: &str = "config/robot_on_sand.yaml";
+
+impl BagArgs {
+    /// The bag directory for `scene_name`, or `None` with `--no-bag`.
+    fn dir(&self, scene_name: &str) -> Option<PathBuf> {
+        if self.no_bag {
+            return None;
+        }
+        Some(self.dir.clone().unwrap_or_else(|| {
+            sandstep::ros::default_bag_dir(std::path::Path::new(DEFAULT_BAG_PARENT), scene_name)
+        }))
+    }
+}
+
+/// A flag set by the first Ctrl-C or SIGTERM; a second one exits at once.
+fn stop_flag() -> anyhow::Result<Arc<AtomicBool>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || {
+        if flag.swap(true, Ordering::SeqCst) {
+            eprintln!("\nstopping now");
+            std::process::exit(130);
+        }
+        eprintln!("\nstopping after this step (again to quit at once)");
+    })?;
+    Ok(stop)
 }
 
 fn main() -> ExitCode {
@@ -80,6 +160,50 @@ fn set_threads(threads: Option<usize>) -> anyhow::Result<()> {
     Ok(())
 }
 
+fn check_duration(duration: Option<f64>) -> anyhow::Result<()> {
+    if let Some(d) = duration {
+        anyhow::ensure!(d > 0.0 && d.is_finite(), "--duration must be > 0 seconds");
+    }
+    Ok(())
+}
+
+fn default_node_scene() -> PathBuf {
+    let here = PathBuf::from(DEFAULT_NODE_SCENE);
+    if here.exists() {
+        here
+    } else {
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(DEFAULT_NODE_SCENE)
+    }
+}
+
+/// Runs `scene`, recording into `bag_dir` if given; the bag is finished on errors too.
+fn run_recorded(
+    scene: &Scene,
+    opts: &RunOptions,
+    bag_dir: Option<PathBuf>,
+) -> anyhow::Result<sandstep::scene::RunSummary> {
+    let running = || format!("running {}", scene.file.display());
+    let Some(dir) = bag_dir else {
+        return run_scene(scene, opts).with_context(running);
+    };
+    let sim = sandstep::scene::Simulation::new(scene).with_context(running)?;
+    let writer = sandstep::bag::BagWriter::create(&dir)?;
+    let mut recorder = sandstep::ros::Publishing::new(scene, &sim, None, Some(writer))?;
+    drop(sim);
+    let outcome = run_scene_observed(scene, opts, &mut recorder);
+    let finished = recorder.finish();
+    let summary = outcome
+        .with_context(|| format!("{} (the bag so far is in {})", running(), dir.display()))?;
+    if let Some(bag) = finished? {
+        eprintln!(
+            "bag: {} ({} messages)",
+            bag.dir.display(),
+            bag.message_count
+        );
+    }
+    Ok(summary)
+}
+
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Run {
@@ -89,19 +213,18 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             overrides,
             out,
             json,
+            bag,
         } => {
             set_threads(threads)?;
-            if let Some(d) = duration {
-                anyhow::ensure!(d > 0.0 && d.is_finite(), "--duration must be > 0 seconds");
-            }
+            check_duration(duration)?;
             let scene = Scene::load(&scene, &overrides)?;
             let opts = RunOptions {
                 duration_s: duration,
                 out_dir: out,
                 progress: !json,
+                stop: Some(stop_flag()?),
             };
-            let summary = run_scene(&scene, &opts)
-                .with_context(|| format!("running {}", scene.file.display()))?;
+            let summary = run_recorded(&scene, &opts, bag.dir(&scene.config.name))?;
             if json {
                 println!("{}", serde_json::to_string(&summary)?);
             } else {
@@ -121,7 +244,54 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 }
             }
         }
+        Command::Node {
+            scene,
+            duration,
+            realtime,
+            threads,
+            overrides,
+            json,
+            bag,
+        } => {
+            set_threads(threads)?;
+            check_duration(duration)?;
+            let file = scene.unwrap_or_else(default_node_scene);
+            let scene = Scene::load(&file, &overrides)?;
+            let opts = sandstep::ros::NodeRunOptions {
+                duration_s: duration,
+                realtime,
+                bag_dir: bag.dir(&scene.config.name),
+                progress: !json,
+                stop: stop_flag()?,
+            };
+            let summary = sandstep::ros::run_node(&scene, &opts)
+                .with_context(|| format!("node on {}", scene.file.display()))?;
+            if json {
+                println!("{}", serde_json::to_string(&summary)?);
+            } else {
+                println!(
+                    "{}: {:.3} s simulated in {:.2} s wall (real-time factor {:.3}), \
+                     {} commands, {} resets",
+                    summary.node,
+                    summary.sim_time_s,
+                    summary.wall_time_s,
+                    summary.real_time_factor,
+                    summary.commands_received,
+                    summary.resets
+                );
+                if let Some(bag) = &summary.bag {
+                    println!(
+                        "  bag: {} ({} messages)",
+                        bag.dir.display(),
+                        bag.message_count
+                    );
+                }
+            }
+        }
         Command::Urdf(args) => sandstep::robot::run_urdf_command(&args)?,
+        Command::Analyze { bag, plots, json } => {
+            sandstep::analysis::bag::run_analyze_command(&bag, plots.as_deref(), json)?
+        }
         Command::Bench {
             particles,
             threads,

@@ -30,6 +30,7 @@ fn run_json_has_the_documented_keys() {
         "--threads",
         "2",
         "--json",
+        "--no-bag",
     ]);
     for key in [
         "scene",
@@ -92,4 +93,105 @@ fn bad_scene_fails_with_the_file_and_field() {
         err.contains("config/column_collapse.yaml") && err.contains("sand.dx_m"),
         "{err}"
     );
+}
+
+#[test]
+fn run_records_a_bag_of_the_robot() {
+    let dir = tempfile::tempdir().unwrap();
+    let bag = dir.path().join("ground");
+    let v = sandstep_json(&[
+        "run",
+        "config/robot_on_ground.yaml",
+        "--duration",
+        "1",
+        "--json",
+        "--bag",
+        bag.to_str().unwrap(),
+    ]);
+    let reader = sandstep::bag::BagReader::open(&bag).unwrap();
+    let count = |topic: &str| {
+        reader
+            .topics()
+            .iter()
+            .find(|t| t.name == topic)
+            .map_or(0, |t| t.message_count)
+    };
+    // 100 Hz of sim time for 1 s, both ends included.
+    for topic in ["/clock", "/odom", "/joint_states", "/tf", "/body_pose"] {
+        assert_eq!(count(topic), 101, "{topic}: {:?}", reader.topics());
+    }
+    assert_eq!(count("/robot_description"), 1);
+    assert_eq!(count("/tf_static"), 1);
+    // The bag's last pose is the run's final position.
+    let odom: Vec<(u64, sandstep::msgs::Odometry)> = reader.read("/odom").unwrap();
+    let (t_ns, last) = odom.last().unwrap();
+    assert_eq!(*t_ns, 1_000_000_000);
+    let final_x = v["metrics"]["final_position_m"][0].as_f64().unwrap();
+    assert!(
+        (last.pose.pose.position.x - final_x).abs() < 1e-9,
+        "{final_x} vs {last:?}"
+    );
+}
+
+#[test]
+fn run_refuses_an_existing_bag_directory() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("something"), "x").unwrap();
+    let out = sandstep(&[
+        "run",
+        "config/robot_on_ground.yaml",
+        "--duration",
+        "0.1",
+        "--bag",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains(dir.path().to_str().unwrap()), "{err}");
+}
+
+#[test]
+fn sigterm_stops_a_run_with_its_summary_and_bag() {
+    let dir = tempfile::tempdir().unwrap();
+    let bag = dir.path().join("terminated");
+    let child = Command::new(env!("CARGO_BIN_EXE_sandstep"))
+        .args([
+            "run",
+            "config/robot_on_ground.yaml",
+            "--duration",
+            "600",
+            "--json",
+        ])
+        .arg("--bag")
+        .arg(&bag)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    let status = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["stopped_early"], true, "{v}");
+    let sim_time = v["sim_time_s"].as_f64().unwrap();
+    assert!(sim_time > 0.0 && sim_time < 600.0, "{v}");
+    let reader = sandstep::bag::BagReader::open(&bag).unwrap();
+    let odom = reader
+        .topics()
+        .iter()
+        .find(|t| t.name == "/odom")
+        .unwrap()
+        .message_count;
+    // One pose per frame of 0.01 s, the start included.
+    assert_eq!(odom, (sim_time * 100.0).round() as u64 + 1, "{v}");
+    assert!(reader.metadata_counts().is_some(), "metadata.yaml written");
 }

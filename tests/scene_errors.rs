@@ -74,6 +74,13 @@ fn out_of_range_values() {
             "sand.domain.walls.z_min",
         ),
         ("duration_s=0", "duration_s"),
+        ("node.state_rate_hz=0", "node.state_rate_hz"),
+        ("node.surface_rate_hz=-1", "node.surface_rate_hz"),
+        ("node.command_timeout_s=-0.5", "node.command_timeout_s"),
+        ("node.stride_length_m=0", "node.stride_length_m"),
+        ("node.name=9lives", "node.name"),
+        ("node.namespace=robot1", "node.namespace"),
+        ("node.namespace=/a//b", "node.namespace"),
         (
             "column_collapse.material=gravel",
             "column_collapse.material",

@@ -336,6 +336,11 @@ impl RobotSim {
         (q, w)
     }
 
+    /// Largest rapier step (s): `robot.physics.max_dt_s`.
+    pub fn max_dt_s(&self) -> f64 {
+        self.max_dt_s
+    }
+
     /// Simulated time (s).
     pub fn time_s(&self) -> f64 {
         self.time_s

@@ -27,6 +27,7 @@ pub fn validate(scene: &Scene) -> Result<(), SceneError> {
     if let Some(robot) = &c.robot {
         robot.validate(&scene.file)?;
     }
+    validate_node(scene)?;
     if !(c.coupling.friction >= 0.0 && c.coupling.friction.is_finite()) {
         return Err(scene.invalid(
             "coupling.friction",
@@ -351,4 +352,85 @@ pub fn fill_body(body: &BodyConfig, dx: f32, density: f32, material: u16) -> Vec
         }
     }
     out
+}
+
+/// Checks the `node` section.
+fn validate_node(scene: &Scene) -> Result<(), SceneError> {
+    let n = &scene.config.node;
+    let check = |field: &str, ok: bool, v: f64, rule: &str| {
+        if ok {
+            Ok(())
+        } else {
+            Err(scene.invalid(format!("node.{field}"), format!("{v} must be {rule}")))
+        }
+    };
+    let positive = |v: f64| v > 0.0 && v.is_finite();
+    let non_negative = |v: f64| v >= 0.0 && v.is_finite();
+    check(
+        "state_rate_hz",
+        positive(n.state_rate_hz),
+        n.state_rate_hz,
+        "a finite number > 0",
+    )?;
+    check(
+        "surface_rate_hz",
+        non_negative(n.surface_rate_hz),
+        n.surface_rate_hz,
+        "a finite number >= 0",
+    )?;
+    if let Some(cell) = n.surface_cell_m {
+        check(
+            "surface_cell_m",
+            positive(cell as f64),
+            cell as f64,
+            "a finite number > 0",
+        )?;
+    }
+    check(
+        "command_timeout_s",
+        non_negative(n.command_timeout_s),
+        n.command_timeout_s,
+        "a finite number >= 0",
+    )?;
+    check(
+        "stride_length_m",
+        positive(n.stride_length_m),
+        n.stride_length_m,
+        "a finite number > 0",
+    )?;
+    check(
+        "track_width_m",
+        positive(n.track_width_m),
+        n.track_width_m,
+        "a finite number > 0",
+    )?;
+    let name_ok = !n.name.is_empty()
+        && !n.name.starts_with(|c: char| c.is_ascii_digit())
+        && n.name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_');
+    if !name_ok {
+        return Err(scene.invalid(
+            "node.name",
+            format!(
+                "`{}` must be letters, digits and _ and not start with a digit",
+                n.name
+            ),
+        ));
+    }
+    let namespace_ok = n.namespace.starts_with('/')
+        && (n.namespace == "/"
+            || n.namespace[1..].split('/').all(|part| {
+                !part.is_empty() && part.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+            }));
+    if !namespace_ok {
+        return Err(scene.invalid(
+            "node.namespace",
+            format!(
+                "`{}` must be `/` or `/a/b` with parts of letters, digits and _",
+                n.namespace
+            ),
+        ));
+    }
+    Ok(())
 }

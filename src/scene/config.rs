@@ -30,6 +30,9 @@ pub struct SceneConfig {
     /// What the run writes besides its summary.
     #[serde(default)]
     pub output: OutputConfig,
+    /// The ROS 2 node and its recording (`sandstep node`, and the bag of `sandstep run`).
+    #[serde(default)]
+    pub node: NodeConfig,
 }
 
 fn default_gravity() -> [f32; 3] {
@@ -367,6 +370,66 @@ impl Default for OutputConfig {
         OutputConfig {
             frame_interval_s: default_frame_interval(),
             ply_every_frames: 0,
+        }
+    }
+}
+
+/// The ROS 2 node: names, rates, command handling (`docs/ros.md`).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct NodeConfig {
+    /// Node name. Default `sandstep`.
+    pub name: String,
+    /// Node namespace; relative topics (all but `/clock`, `/tf`, `/tf_static`) live in it.
+    /// Default `/`.
+    pub namespace: String,
+    /// Rate of the robot state topics (`joint_states`, `odom`, `/tf`, `body_pose`,
+    /// `leg_wrenches/*`) and `/clock`, and of the control tick that applies commands (Hz of
+    /// simulated time). Default 100.
+    pub state_rate_hz: f64,
+    /// Rate of `sand/surface` (Hz of simulated time); 0 = never. Default 2.
+    pub surface_rate_hz: f64,
+    /// Side of the x-y columns whose top particle makes one `sand/surface` point (m).
+    /// Default: the sand's `dx_m`.
+    pub surface_cell_m: Option<f32>,
+    /// A command older than this (s of simulated time) gives way to the scene's `robot.gait`;
+    /// 0 = commands never expire. Default 1.
+    pub command_timeout_s: f64,
+    /// Distance the robot covers per gait cycle, turning `cmd_vel` linear.x (m/s) into a gait
+    /// frequency (m). Default 0.1 (C-legs on sand at 2 Hz walk about 0.2 m/s).
+    pub stride_length_m: f64,
+    /// Lateral distance between the left and right legs, turning `cmd_vel` angular.z (rad/s)
+    /// into a right-minus-left frequency difference (m). Default 0.05.
+    pub track_width_m: f64,
+    /// How service requests and replies are matched on the wire: `enhanced` (rmw_fastrtps,
+    /// the ROS 2 default), `cyclone` (rmw_cyclonedds) or `basic`. Default `enhanced`.
+    pub service_mapping: ServiceMappingConfig,
+    /// Use only the loopback interface for DDS (peers on this machine only). Default false.
+    pub loopback_only: bool,
+}
+
+/// `node.service_mapping`.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum ServiceMappingConfig {
+    Enhanced,
+    Cyclone,
+    Basic,
+}
+
+impl Default for NodeConfig {
+    fn default() -> Self {
+        NodeConfig {
+            name: "sandstep".into(),
+            namespace: "/".into(),
+            state_rate_hz: 100.0,
+            surface_rate_hz: 2.0,
+            surface_cell_m: None,
+            command_timeout_s: 1.0,
+            stride_length_m: 0.1,
+            track_width_m: 0.05,
+            service_mapping: ServiceMappingConfig::Enhanced,
+            loopback_only: false,
         }
     }
 }

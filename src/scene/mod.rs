@@ -6,11 +6,13 @@ mod overrides;
 pub mod ply;
 pub mod robot_sand;
 pub mod run;
+pub mod simulation;
 
 use std::path::{Path, PathBuf};
 
 pub use config::SceneConfig;
-pub use run::{run_scene, RunOptions, RunSummary};
+pub use run::{run_scene, run_scene_observed, NoObserver, Observer, RunOptions, RunSummary};
+pub use simulation::{LegWrench, LinkPose, Simulation};
 
 /// A scene that cannot be loaded or built; names the file and the field.
 #[derive(thiserror::Error, Debug)]

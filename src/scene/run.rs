@@ -1,16 +1,19 @@
 //! Running a scene headless: frames, progress, snapshots and the summary.
 
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
 use serde_json::{json, Map, Value};
 
+use super::simulation::Simulation;
 use super::Scene;
 use crate::analysis::collapse::{self, CollapseGeometry};
-use crate::mpm::{SimError, Solver};
-use crate::robot::{RobotConfig, RobotError, RobotSim};
+use crate::mpm::SimError;
+use crate::robot::{RobotError, RobotSim};
 
 /// How to run a scene.
 #[derive(Clone, Debug, Default)]
@@ -21,6 +24,9 @@ pub struct RunOptions {
     pub out_dir: Option<PathBuf>,
     /// Show a progress bar on stderr.
     pub progress: bool,
+    /// Set (e.g. by a Ctrl-C handler) to stop after the current frame; the summary then covers
+    /// the time simulated so far.
+    pub stop: Option<Arc<AtomicBool>>,
 }
 
 /// What a run reports (`sandstep run --json` prints it).
@@ -38,6 +44,8 @@ pub struct RunSummary {
     pub stage_times_s: Map<String, Value>,
     /// Scene-specific measurements (see `docs/scenes.md`).
     pub metrics: Map<String, Value>,
+    /// True when the run was stopped before its end (Ctrl-C).
+    pub stopped_early: bool,
 }
 
 #[derive(thiserror::Error, Debug)]
@@ -55,127 +63,156 @@ pub enum RunError {
     Empty(String),
     #[error(transparent)]
     Coupling(#[from] crate::coupling::CouplingError),
+    #[error(
+        "the robot blew up at t = {time_s:.6} s: body at {position_m:?} m moving at {speed_m_s:.3e} m/s; \
+         reduce robot.physics.max_dt_s or check the URDF's masses and inertias"
+    )]
+    RobotBlowUp {
+        time_s: f64,
+        position_m: [f32; 3],
+        speed_m_s: f64,
+    },
+    #[error("recording at t = {time_s:.6} s: {message}")]
+    Observer { time_s: f64, message: String },
+}
+
+/// Something that looks at the simulation at every frame (and at time 0), e.g. a bag recorder.
+pub trait Observer {
+    /// Called after each frame; an error stops the run.
+    fn observe(&mut self, sim: &mut Simulation) -> Result<(), String>;
+}
+
+/// Observes nothing.
+pub struct NoObserver;
+
+impl Observer for NoObserver {
+    fn observe(&mut self, _: &mut Simulation) -> Result<(), String> {
+        Ok(())
+    }
 }
 
 /// Runs a scene to its end and measures it.
 pub fn run_scene(scene: &Scene, opts: &RunOptions) -> Result<RunSummary, RunError> {
-    if let Some(robot) = &scene.config.robot {
-        return match scene.config.sand {
-            None => run_robot_on_ground(scene, robot, opts),
-            Some(_) => super::robot_sand::run_robot_on_sand(scene, robot, opts),
-        };
-    }
+    run_scene_observed(scene, opts, &mut NoObserver)
+}
+
+/// Runs a scene to its end (or until `opts.stop` is set), calling `observer` at time 0 and after
+/// every frame, and measures it.
+pub fn run_scene_observed(
+    scene: &Scene,
+    opts: &RunOptions,
+    observer: &mut dyn Observer,
+) -> Result<RunSummary, RunError> {
     let config = &scene.config;
-    let mut solver = scene
-        .build_solver()
-        .ok_or_else(|| RunError::Empty(scene.file.display().to_string()))?;
+    let mut sim = Simulation::new(scene)?;
     let duration = opts.duration_s.unwrap_or(config.duration_s);
     let frame_interval = config.output.frame_interval_s;
     let frames = (duration / frame_interval).ceil().max(1.0) as u64;
     let collapse = collapse_geometry(scene);
-    let initial = collapse.map(|g| collapse::measure(&g, &solver.particles.position));
+    let initial = sim
+        .solver()
+        .zip(collapse)
+        .map(|(solver, g)| collapse::measure(&g, &solver.particles.position));
 
     let out_dir = opts
         .out_dir
         .clone()
         .unwrap_or_else(|| PathBuf::from("out").join(&config.name));
     let ply_every = config.output.ply_every_frames as u64;
-    if ply_every > 0 {
+    let snapshots = ply_every > 0 && sim.solver().is_some();
+    if snapshots {
         std::fs::create_dir_all(&out_dir).map_err(|source| RunError::Write {
             path: out_dir.clone(),
             source,
         })?;
-        write_snapshot(&out_dir, 0, &solver)?;
+        write_snapshot(&out_dir, 0, &sim)?;
     }
+    let observe = |sim: &mut Simulation, observer: &mut dyn Observer| {
+        observer.observe(sim).map_err(|message| RunError::Observer {
+            time_s: sim.time_s(),
+            message,
+        })
+    };
+    observe(&mut sim, observer)?;
 
     let bar = progress_bar(opts.progress, duration);
     let wall = Instant::now();
-    let mut particle_steps = 0u64;
+    let (mut sinkage_sum, mut frames_done) = (0.0f64, 0u64);
+    let mut stopped_early = false;
     for frame in 1..=frames {
-        let target = (frame as f64 * frame_interval).min(duration);
-        let steps = solver.advance_to(target).inspect_err(|_| bar.abandon())?;
-        particle_steps += steps * solver.particles.len() as u64;
-        bar.set_position((target * 1000.0) as u64);
-        bar.set_message(format!(
-            "step {} dt {:.2e} s",
-            solver.steps,
-            solver.next_dt()
-        ));
-        if ply_every > 0 && frame % ply_every == 0 {
-            write_snapshot(&out_dir, frame, &solver)?;
+        if opts
+            .stop
+            .as_ref()
+            .is_some_and(|s| s.load(Ordering::Relaxed))
+        {
+            stopped_early = true;
+            break;
         }
+        let target = (frame as f64 * frame_interval).min(duration);
+        sim.advance_to(target).inspect_err(|_| bar.abandon())?;
+        frames_done += 1;
+        sinkage_sum += sim.leg_sinkage_m().unwrap_or(0.0);
+        bar.set_position((target * 1000.0) as u64);
+        if let Some(solver) = sim.solver() {
+            bar.set_message(format!(
+                "step {} dt {:.2e} s",
+                solver.steps,
+                solver.next_dt()
+            ));
+        }
+        if snapshots && frame % ply_every == 0 {
+            write_snapshot(&out_dir, frame, &sim)?;
+        }
+        observe(&mut sim, observer).inspect_err(|_| bar.abandon())?;
     }
     bar.finish_and_clear();
     let wall_time_s = wall.elapsed().as_secs_f64();
 
     let mut metrics = Map::new();
-    if let (Some(g), Some(initial)) = (collapse, initial) {
-        let last = collapse::measure(&g, &solver.particles.position);
-        let cc = config
-            .column_collapse
-            .as_ref()
-            .expect("collapse geometry implies the section");
-        let normalized = (last.length_m - initial.length_m) / initial.length_m;
-        metrics.insert(
-            "aspect_ratio".into(),
-            json!(initial.height_m / initial.length_m),
-        );
-        metrics.insert("initial_length_m".into(), json!(initial.length_m));
-        metrics.insert("initial_height_m".into(), json!(initial.height_m));
-        metrics.insert("runout_m".into(), json!(last.length_m));
-        metrics.insert("final_height_m".into(), json!(last.height_m));
-        metrics.insert("normalized_runout".into(), json!(normalized));
-        metrics.insert(
-            "lube_2005_normalized_runout".into(),
-            json!(collapse::lube_normalized_runout(cc.aspect_ratio)),
-        );
+    if let Some(robot) = sim.robot() {
+        metrics = robot_metrics_json(robot);
     }
-    metrics.insert("total_mass_kg".into(), json!(solver.particles.total_mass()));
-    Ok(RunSummary::of_solver(
+    if let Some(solver) = sim.solver() {
+        if let (Some(g), Some(initial)) = (collapse, initial) {
+            let last = collapse::measure(&g, &solver.particles.position);
+            let cc = config
+                .column_collapse
+                .as_ref()
+                .expect("collapse geometry implies the section");
+            let normalized = (last.length_m - initial.length_m) / initial.length_m;
+            metrics.insert(
+                "aspect_ratio".into(),
+                json!(initial.height_m / initial.length_m),
+            );
+            metrics.insert("initial_length_m".into(), json!(initial.length_m));
+            metrics.insert("initial_height_m".into(), json!(initial.height_m));
+            metrics.insert("runout_m".into(), json!(last.length_m));
+            metrics.insert("final_height_m".into(), json!(last.height_m));
+            metrics.insert("normalized_runout".into(), json!(normalized));
+            metrics.insert(
+                "lube_2005_normalized_runout".into(),
+                json!(collapse::lube_normalized_runout(cc.aspect_ratio)),
+            );
+        }
+        if let Some(robot) = sim.robot() {
+            metrics.insert(
+                "mean_sinkage_m".into(),
+                json!(sinkage_sum / frames_done.max(1) as f64),
+            );
+            metrics.insert("sand_mass_kg".into(), json!(solver.particles.total_mass()));
+            metrics.insert("robot_mass_kg".into(), json!(robot.total_mass_kg()));
+            metrics.insert("dx_m".into(), json!(solver.grid().dx));
+        } else {
+            metrics.insert("total_mass_kg".into(), json!(solver.particles.total_mass()));
+        }
+    }
+    Ok(RunSummary::of_simulation(
         &config.name,
-        &solver,
+        &sim,
         wall_time_s,
-        particle_steps,
         metrics,
+        stopped_early,
     ))
-}
-
-/// The robot alone on rigid ground (rapier only).
-fn run_robot_on_ground(
-    scene: &Scene,
-    robot: &RobotConfig,
-    opts: &RunOptions,
-) -> Result<RunSummary, RunError> {
-    let config = &scene.config;
-    let mut sim = RobotSim::new(robot, config.gravity_m_s2)?;
-    let duration = opts.duration_s.unwrap_or(config.duration_s);
-    let frame_interval = config.output.frame_interval_s;
-    let frames = (duration / frame_interval).ceil().max(1.0) as u64;
-    let bar = progress_bar(opts.progress, duration);
-    let wall = Instant::now();
-    let mut steps = 0u64;
-    for frame in 1..=frames {
-        let target = (frame as f64 * frame_interval).min(duration);
-        let dt = target - sim.time_s();
-        // RobotSim::step takes ceil(dt / max_dt_s) rapier steps.
-        steps += (dt / robot.physics.max_dt_s).ceil().max(1.0) as u64;
-        sim.step(dt as f32);
-        bar.set_position((target * 1000.0) as u64);
-    }
-    bar.finish_and_clear();
-    let wall_time_s = wall.elapsed().as_secs_f64();
-    let metrics = robot_metrics_json(&sim);
-    Ok(RunSummary {
-        scene: config.name.clone(),
-        steps,
-        sim_time_s: sim.time_s(),
-        wall_time_s,
-        particles: 0,
-        particle_steps_per_s: 0.0,
-        wall_time_per_sim_s: wall_time_s / sim.time_s().max(1e-12),
-        stage_times_s: Map::new(),
-        metrics,
-    })
 }
 
 /// Where the column of a `column_collapse` scene stands.
@@ -191,42 +228,53 @@ pub fn collapse_geometry(scene: &Scene) -> Option<CollapseGeometry> {
     })
 }
 
-fn write_snapshot(dir: &std::path::Path, frame: u64, solver: &Solver) -> Result<(), RunError> {
+fn write_snapshot(dir: &std::path::Path, frame: u64, sim: &Simulation) -> Result<(), RunError> {
+    let Some(solver) = sim.solver() else {
+        return Ok(());
+    };
     let path = dir.join(format!("particles_{frame:05}.ply"));
     super::ply::write_ply(&path, &solver.particles)
         .map_err(|source| RunError::Write { path, source })
 }
 
 impl RunSummary {
-    /// The summary of a run of `solver` that took `particle_steps` particle-steps.
-    pub(super) fn of_solver(
+    /// The summary of a run of `sim` that took `wall_time_s` seconds.
+    fn of_simulation(
         scene: &str,
-        solver: &Solver,
+        sim: &Simulation,
         wall_time_s: f64,
-        particle_steps: u64,
         metrics: Map<String, Value>,
+        stopped_early: bool,
     ) -> Self {
+        let time_s = sim.time_s();
+        let stage_times_s = sim
+            .solver()
+            .map(|solver| {
+                solver
+                    .stage_times
+                    .named()
+                    .iter()
+                    .map(|(name, t)| (name.to_string(), json!(t.as_secs_f64())))
+                    .collect()
+            })
+            .unwrap_or_default();
         RunSummary {
             scene: scene.to_string(),
-            steps: solver.steps,
-            sim_time_s: solver.time_s,
+            steps: sim.steps(),
+            sim_time_s: time_s,
             wall_time_s,
-            particles: solver.particles.len(),
-            particle_steps_per_s: particle_steps as f64 / wall_time_s.max(1e-9),
-            wall_time_per_sim_s: wall_time_s / solver.time_s.max(1e-12),
-            stage_times_s: solver
-                .stage_times
-                .named()
-                .iter()
-                .map(|(name, t)| (name.to_string(), json!(t.as_secs_f64())))
-                .collect(),
+            particles: sim.solver().map_or(0, |s| s.particles.len()),
+            particle_steps_per_s: sim.particle_steps() as f64 / wall_time_s.max(1e-9),
+            wall_time_per_sim_s: wall_time_s / time_s.max(1e-12),
+            stage_times_s,
             metrics,
+            stopped_early,
         }
     }
 }
 
 /// The robot's metrics as a JSON map.
-pub(super) fn robot_metrics_json(robot: &RobotSim) -> Map<String, Value> {
+fn robot_metrics_json(robot: &RobotSim) -> Map<String, Value> {
     match serde_json::to_value(robot.metrics()).expect("plain data") {
         Value::Object(map) => map,
         _ => unreachable!("metrics serialise as a map"),

@@ -1,0 +1,131 @@
+//! The human-readable summary and the `sandstep analyze` command.
+
+use std::fmt;
+use std::path::Path;
+
+use anyhow::Context;
+
+use super::{analyze_bag, BagSummary};
+use crate::analysis::plots::write_plots;
+
+/// Metres shown as millimetres in the human summary.
+const MM_PER_M: f64 = 1e3;
+
+/// `value` with `decimals` and `unit`, or `-` when absent.
+fn or_dash(value: Option<f64>, decimals: usize, unit: &str) -> String {
+    value.map_or("-".into(), |v| format!("{v:.decimals$} {unit}"))
+}
+
+impl fmt::Display for BagSummary {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(f, "bag: {}", self.bag)?;
+        writeln!(
+            f,
+            "body pose from {}: {:.3} s, distance {:.4} m along x, mean speed {}",
+            self.pose_source,
+            self.duration_s,
+            self.distance_m,
+            or_dash(self.mean_speed_m_s, 4, "m/s")
+        )?;
+        writeln!(
+            f,
+            "  lateral drift {:.4} m, height mean {:.1} mm (min {:.1} mm), max tilt {:.2} deg",
+            self.lateral_drift_m,
+            MM_PER_M * self.body_height_mean_m,
+            MM_PER_M * self.body_height_min_m,
+            self.max_tilt_deg
+        )?;
+        match (&self.gait_joint, self.gait_cycles) {
+            (Some(joint), Some(cycles)) => {
+                writeln!(
+                    f,
+                    "gait: {cycles} complete cycles of {joint}, speed per cycle {} (std {})",
+                    or_dash(self.speed_per_cycle_mean_m_s, 4, "m/s"),
+                    or_dash(self.speed_per_cycle_std_m_s, 4, "m/s")
+                )?;
+                if !self.speed_per_cycle_m_s.is_empty() {
+                    let speeds: Vec<String> = self
+                        .speed_per_cycle_m_s
+                        .iter()
+                        .map(|v| format!("{v:.4}"))
+                        .collect();
+                    writeln!(f, "  per cycle (m/s): {}", speeds.join(" "))?;
+                }
+            }
+            _ => writeln!(f, "gait: no joint states")?,
+        }
+        match (self.sand_level_m, self.sinkage_mean_m, self.sinkage_max_m) {
+            (Some(level), Some(mean), Some(max)) => writeln!(
+                f,
+                "sinkage below the sand level ({:.1} mm): mean {:.2} mm, max {:.2} mm",
+                MM_PER_M * level,
+                MM_PER_M * mean,
+                MM_PER_M * max
+            )?,
+            _ => writeln!(f, "sinkage: -")?,
+        }
+        if !self.leg_forces.is_empty() {
+            writeln!(
+                f,
+                "sand force per leg: {:<24} {:>11} {:>11} {:>15}",
+                "leg", "mean |F| N", "peak |F| N", "mean vert. F N"
+            )?;
+            for (leg, force) in &self.leg_forces {
+                writeln!(
+                    f,
+                    "                    {leg:<24} {:>11.4} {:>11.4} {:>15}",
+                    force.mean_force_n,
+                    force.peak_force_n,
+                    force
+                        .mean_vertical_force_n
+                        .map_or("-".into(), |v| format!("{v:.4}"))
+                )?;
+            }
+        }
+        for (topic, command) in &self.commands {
+            writeln!(
+                f,
+                "command {topic}: {} messages, first {}, last {}",
+                command.count, command.first, command.last
+            )?;
+        }
+        writeln!(f, "topics:")?;
+        for topic in &self.topics {
+            writeln!(
+                f,
+                "  {:<40} {:<36} {:>8}",
+                topic.name, topic.type_name, topic.count
+            )?;
+        }
+        for plot in &self.plots {
+            writeln!(f, "plot: {plot}")?;
+        }
+        for note in &self.notes {
+            writeln!(f, "note: {note}")?;
+        }
+        Ok(())
+    }
+}
+
+/// `sandstep analyze`: analyses `bag`, writes plots into `plots_dir` if given, and prints the
+/// summary (one JSON object with `json`).
+pub fn run_analyze_command(bag: &Path, plots_dir: Option<&Path>, json: bool) -> anyhow::Result<()> {
+    let analysis = analyze_bag(bag).with_context(|| format!("analysing {}", bag.display()))?;
+    let mut summary = analysis.summary.clone();
+    if let Some(dir) = plots_dir {
+        let written = write_plots(&analysis, dir)
+            .with_context(|| format!("writing plots into {}", dir.display()))?;
+        summary.plots = written
+            .files
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect();
+        summary.notes.extend(written.notes);
+    }
+    if json {
+        println!("{}", serde_json::to_string(&summary)?);
+    } else {
+        print!("{summary}");
+    }
+    Ok(())
+}

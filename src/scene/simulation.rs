@@ -1,0 +1,372 @@
+//! One stepping interface over every kind of scene: sand alone, the robot on rigid ground, the
+//! robot on sand. The node and the headless run both drive a [`Simulation`] and read its plain
+//! outputs (robot state, link poses, leg wrenches, the sand surface); they never see rapier or
+//! the solver's internals.
+
+use nalgebra::{UnitQuaternion, Vector3};
+use rapier3d::prelude::RigidBodyHandle;
+
+use super::robot_sand::{leg_sinkage_m, robot_coupling};
+use super::run::RunError;
+use super::Scene;
+use crate::coupling::Coupling;
+use crate::mpm::Solver;
+use crate::robot::geometry::{BODY_LINK, LEGS};
+use crate::robot::{GaitCommand, RobotSim, RobotState};
+
+/// Fastest the robot's body may move before the run is stopped as blown up (m/s): far above
+/// anything a walking robot does, far below what a diverging rigid-body solve produces.
+const ROBOT_BLOWUP_SPEED_M_S: f64 = 100.0;
+
+/// Pose of one link in the world (`odom`) frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LinkPose {
+    /// URDF link name.
+    pub link: String,
+    /// Link origin (m).
+    pub position_m: [f64; 3],
+    /// Orientation, unit quaternion `[x, y, z, w]`.
+    pub orientation_xyzw: [f64; 4],
+}
+
+/// The sand's mean force and torque on one leg over an interval, in the leg link's frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LegWrench {
+    /// URDF link name of the leg.
+    pub link: String,
+    /// Force (N), leg link frame.
+    pub force_n: [f64; 3],
+    /// Torque about the link origin (the hip axis) (N m), leg link frame.
+    pub torque_n_m: [f64; 3],
+}
+
+/// Sum of the sand's impulses on one body since the last read, about the link origin in world
+/// axes.
+#[derive(Clone, Copy, Debug, Default)]
+struct ImpulseSum {
+    linear_n_s: Vector3<f64>,
+    angular_n_m_s: Vector3<f64>,
+}
+
+enum Kind {
+    Sand {
+        solver: Solver,
+    },
+    RobotOnGround {
+        robot: Box<RobotSim>,
+    },
+    RobotOnSand {
+        solver: Solver,
+        robot: Box<RobotSim>,
+        coupling: Coupling,
+        /// Height of the sand surface at the start (m).
+        surface_z_m: f32,
+        /// Per leg, in [`LEGS`] order.
+        leg_impulses: Vec<ImpulseSum>,
+        /// Simulated time the impulses were summed over (s).
+        impulse_time_s: f64,
+    },
+}
+
+/// A scene, built and ready to step.
+pub struct Simulation {
+    kind: Kind,
+    /// Substeps taken (sand substeps, or rapier steps without sand).
+    steps: u64,
+    /// Particle-steps taken (particles times sand substeps).
+    particle_steps: u64,
+}
+
+impl Simulation {
+    /// Builds the scene's sand, robot and coupling at time 0.
+    pub fn new(scene: &Scene) -> Result<Self, RunError> {
+        let config = &scene.config;
+        let kind = match (&config.robot, scene.build_solver()) {
+            (None, Some(solver)) => Kind::Sand { solver },
+            (None, None) => return Err(RunError::Empty(scene.file.display().to_string())),
+            (Some(robot_cfg), None) => Kind::RobotOnGround {
+                robot: Box::new(RobotSim::new(robot_cfg, config.gravity_m_s2)?),
+            },
+            (Some(robot_cfg), Some(solver)) => {
+                let robot = Box::new(RobotSim::new(robot_cfg, config.gravity_m_s2)?);
+                let coupling = robot_coupling(&robot, &config.coupling, solver.grid().dx)?;
+                let surface_z_m = solver
+                    .particles
+                    .position
+                    .iter()
+                    .map(|x| x.z)
+                    .fold(f32::NEG_INFINITY, f32::max);
+                Kind::RobotOnSand {
+                    solver,
+                    robot,
+                    coupling,
+                    surface_z_m,
+                    leg_impulses: vec![ImpulseSum::default(); LEGS.len()],
+                    impulse_time_s: 0.0,
+                }
+            }
+        };
+        Ok(Simulation {
+            kind,
+            steps: 0,
+            particle_steps: 0,
+        })
+    }
+
+    /// Simulated time (s).
+    pub fn time_s(&self) -> f64 {
+        match &self.kind {
+            Kind::Sand { solver } | Kind::RobotOnSand { solver, .. } => solver.time_s,
+            Kind::RobotOnGround { robot } => robot.time_s(),
+        }
+    }
+
+    /// Advances to `target_s` seconds of simulated time (no-op if already there).
+    pub fn advance_to(&mut self, target_s: f64) -> Result<(), RunError> {
+        match &mut self.kind {
+            Kind::Sand { solver } => {
+                let steps = solver.advance_to(target_s)?;
+                self.steps += steps;
+                self.particle_steps += steps * solver.particles.len() as u64;
+            }
+            Kind::RobotOnGround { robot } => {
+                let dt = target_s - robot.time_s();
+                if dt > 0.0 {
+                    let max_dt = robot.max_dt_s();
+                    self.steps += (dt / max_dt).ceil().max(1.0) as u64;
+                    robot.step(dt as f32);
+                }
+                check_robot(robot)?;
+            }
+            Kind::RobotOnSand {
+                solver,
+                robot,
+                coupling,
+                leg_impulses,
+                impulse_time_s,
+                ..
+            } => {
+                let dx = solver.grid().dx;
+                while solver.time_s < target_s - 1e-12 {
+                    let remaining = (target_s - solver.time_s) as f32;
+                    let dt = solver
+                        .next_dt()
+                        .min(coupling.max_dt_s(&robot.world().bodies, dx))
+                        .min(remaining);
+                    let impulses = coupling.substep(solver, &mut robot.world_mut().bodies, dt)?;
+                    accumulate_leg_impulses(robot, coupling, &impulses, leg_impulses);
+                    *impulse_time_s += dt as f64;
+                    robot.step(dt);
+                    check_robot(robot)?;
+                    self.steps += 1;
+                    self.particle_steps += solver.particles.len() as u64;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Gives the robot a new gait command, acting from the next step (no-op without a robot).
+    pub fn command(&mut self, cmd: GaitCommand) {
+        if let Some(robot) = self.robot_mut() {
+            robot.command(cmd);
+        }
+    }
+
+    /// The robot, if the scene has one.
+    pub fn robot(&self) -> Option<&RobotSim> {
+        match &self.kind {
+            Kind::Sand { .. } => None,
+            Kind::RobotOnGround { robot } | Kind::RobotOnSand { robot, .. } => Some(robot),
+        }
+    }
+
+    fn robot_mut(&mut self) -> Option<&mut RobotSim> {
+        match &mut self.kind {
+            Kind::Sand { .. } => None,
+            Kind::RobotOnGround { robot } | Kind::RobotOnSand { robot, .. } => Some(robot),
+        }
+    }
+
+    /// The sand solver, if the scene has sand.
+    pub fn solver(&self) -> Option<&Solver> {
+        match &self.kind {
+            Kind::Sand { solver } | Kind::RobotOnSand { solver, .. } => Some(solver),
+            Kind::RobotOnGround { .. } => None,
+        }
+    }
+
+    /// The robot's state, if the scene has one.
+    pub fn robot_state(&self) -> Option<RobotState> {
+        self.robot().map(RobotSim::state)
+    }
+
+    /// World poses of the body (`base_link`) and every leg link, body first.
+    pub fn link_poses(&self) -> Vec<LinkPose> {
+        let Some(robot) = self.robot() else {
+            return Vec::new();
+        };
+        let bodies = &robot.world().bodies;
+        let pose = |name: String, h: RigidBodyHandle| {
+            let p = bodies[h].position();
+            let (t, r) = (p.translation, p.rotation);
+            LinkPose {
+                link: name,
+                position_m: [t.x as f64, t.y as f64, t.z as f64],
+                orientation_xyzw: [r.x as f64, r.y as f64, r.z as f64, r.w as f64],
+            }
+        };
+        std::iter::once(pose(BODY_LINK.to_string(), robot.body_handle()))
+            .chain(
+                LEGS.iter()
+                    .zip(robot.leg_handles())
+                    .map(|(leg, h)| pose(leg.link_name(), h)),
+            )
+            .collect()
+    }
+
+    /// The sand's mean wrench on each leg since the last call, in each leg link's frame; `None`
+    /// without sand, and zero wrenches when no time has passed. Resets the sums.
+    pub fn take_leg_wrenches(&mut self) -> Option<Vec<LegWrench>> {
+        let Kind::RobotOnSand {
+            robot,
+            leg_impulses,
+            impulse_time_s,
+            ..
+        } = &mut self.kind
+        else {
+            return None;
+        };
+        let elapsed = *impulse_time_s;
+        let bodies = &robot.world().bodies;
+        let wrenches = LEGS
+            .iter()
+            .zip(robot.leg_handles())
+            .zip(leg_impulses.iter_mut())
+            .map(|((leg, h), sum)| {
+                let r = bodies[h].position().rotation;
+                let to_link = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                    r.w as f64, r.x as f64, r.y as f64, r.z as f64,
+                ))
+                .inverse();
+                let mean = |v: Vector3<f64>| {
+                    let v = to_link * v / elapsed.max(f64::MIN_POSITIVE);
+                    if elapsed > 0.0 {
+                        [v.x, v.y, v.z]
+                    } else {
+                        [0.0; 3]
+                    }
+                };
+                let wrench = LegWrench {
+                    link: leg.link_name(),
+                    force_n: mean(sum.linear_n_s),
+                    torque_n_m: mean(sum.angular_n_m_s),
+                };
+                *sum = ImpulseSum::default();
+                wrench
+            })
+            .collect();
+        *impulse_time_s = 0.0;
+        Some(wrenches)
+    }
+
+    /// The top of the sand: for each `cell_m` x `cell_m` column that holds particles, the
+    /// highest particle (x, y of the column centre, z of that particle) (m). `None` without sand.
+    pub fn sand_surface(&self, cell_m: f32) -> Option<Vec<[f32; 3]>> {
+        let solver = self.solver()?;
+        let positions = &solver.particles.position;
+        let (mut min, mut max) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
+        for p in positions {
+            min = [min[0].min(p.x), min[1].min(p.y)];
+            max = [max[0].max(p.x), max[1].max(p.y)];
+        }
+        if positions.is_empty() {
+            return Some(Vec::new());
+        }
+        let columns = |a: usize| ((max[a] - min[a]) / cell_m).floor() as usize + 1;
+        let (nx, ny) = (columns(0), columns(1));
+        let mut top = vec![f32::NEG_INFINITY; nx * ny];
+        for p in positions {
+            let i = (((p.x - min[0]) / cell_m) as usize).min(nx - 1);
+            let j = (((p.y - min[1]) / cell_m) as usize).min(ny - 1);
+            let z = &mut top[j * nx + i];
+            *z = z.max(p.z);
+        }
+        Some(
+            top.iter()
+                .enumerate()
+                .filter(|(_, z)| z.is_finite())
+                .map(|(k, &z)| {
+                    let (i, j) = (k % nx, k / nx);
+                    [
+                        min[0] + (i as f32 + 0.5) * cell_m,
+                        min[1] + (j as f32 + 0.5) * cell_m,
+                        z,
+                    ]
+                })
+                .collect(),
+        )
+    }
+
+    /// Depth of the deepest leg point below the initial sand surface (m); `None` without sand.
+    pub fn leg_sinkage_m(&self) -> Option<f64> {
+        match &self.kind {
+            Kind::RobotOnSand {
+                robot, surface_z_m, ..
+            } => Some(leg_sinkage_m(robot, *surface_z_m)),
+            _ => None,
+        }
+    }
+
+    /// Substeps taken so far.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// Particle-steps taken so far.
+    pub fn particle_steps(&self) -> u64 {
+        self.particle_steps
+    }
+}
+
+/// Adds one substep's impulses on each leg, moved from the body's centre of mass to the link
+/// origin: `L_o = L_com + (com - o) x J`.
+fn accumulate_leg_impulses(
+    robot: &RobotSim,
+    coupling: &Coupling,
+    impulses: &[crate::mpm::cpic::ColliderImpulse],
+    sums: &mut [ImpulseSum],
+) {
+    let bodies = &robot.world().bodies;
+    for (leg, &h) in robot.leg_handles().iter().enumerate() {
+        let rb = &bodies[h];
+        let com = rb.center_of_mass();
+        let origin = rb.position().translation;
+        let arm = Vector3::new(
+            (com.x - origin.x) as f64,
+            (com.y - origin.y) as f64,
+            (com.z - origin.z) as f64,
+        );
+        for (c, j) in coupling.colliders().iter().zip(impulses) {
+            if c.body == h {
+                sums[leg].linear_n_s += j.linear_n_s;
+                sums[leg].angular_n_m_s += j.angular_n_m_s + arm.cross(&j.linear_n_s);
+            }
+        }
+    }
+}
+
+/// Stops a robot whose body has left the finite or plausible range.
+fn check_robot(robot: &RobotSim) -> Result<(), RunError> {
+    let rb = &robot.world().bodies[robot.body_handle()];
+    let (p, v) = (rb.translation(), rb.linvel());
+    let speed = v.length() as f64;
+    if !(p.is_finite() && speed.is_finite() && speed <= ROBOT_BLOWUP_SPEED_M_S) {
+        return Err(RunError::RobotBlowUp {
+            time_s: robot.time_s(),
+            position_m: [p.x, p.y, p.z],
+            speed_m_s: speed,
+        });
+    }
+    Ok(())
+}

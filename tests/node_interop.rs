@@ -1,0 +1,247 @@
+//! The `sandstep node` binary against independent software: an Eclipse Cyclone DDS peer in
+//! Python reads its topics and drives it, and a SIGINT in the middle of a run leaves a bag that
+//! the project's reader and the Python readers (`mcap`, `rosbags`) open. All DDS traffic stays
+//! on loopback, in a domain of the test's own.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use sandstep::bag::BagReader;
+
+const CYCLONE_LOOPBACK: &str = r#"<CycloneDDS><Domain Id="any"><General><Interfaces><NetworkInterface name="lo"/></Interfaces></General></Domain></CycloneDDS>"#;
+
+fn crate_dir() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A DDS domain no other test run on this machine uses at the same moment.
+fn test_domain(offset: u16) -> u16 {
+    150 + (std::process::id() % 20) as u16 * 4 + offset
+}
+
+/// Starts `sandstep node` with `args` in the crate directory, in `domain`.
+fn spawn_node(domain: u16, args: &[&str]) -> Child {
+    Command::new(env!("CARGO_BIN_EXE_sandstep"))
+        .arg("node")
+        .args(args)
+        .args(["--set", "node.loopback_only=true", "--json"])
+        .current_dir(crate_dir())
+        .env("ROS_DOMAIN_ID", domain.to_string())
+        .env("ROS_DISTRO", "jazzy")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start sandstep node")
+}
+
+/// Waits for `child` up to `timeout`; kills it and panics if it is still running.
+fn wait_output(mut child: Child, timeout: Duration) -> std::process::Output {
+    let deadline = Instant::now() + timeout;
+    while Instant::now() < deadline {
+        if child.try_wait().unwrap().is_some() {
+            return child.wait_with_output().unwrap();
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    child.kill().ok();
+    let out = child.wait_with_output().unwrap();
+    panic!(
+        "still running after {timeout:?}; stderr:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+fn json_line(out: &std::process::Output, what: &str) -> serde_json::Value {
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success(),
+        "{what} failed ({}):\n{stderr}\n{stdout}",
+        out.status
+    );
+    serde_json::from_str(stdout.lines().last().unwrap_or_default())
+        .unwrap_or_else(|e| panic!("{what}: no JSON ({e}):\n{stdout}\n{stderr}"))
+}
+
+#[test]
+fn cyclone_dds_peer_reads_the_robot_and_reverses_it() {
+    let domain = test_domain(0);
+    let bag_root = tempfile::tempdir().unwrap();
+    let bag = bag_root.path().join("interop");
+    let bag_arg = bag.to_str().unwrap();
+    let node = spawn_node(
+        domain,
+        &[
+            "config/robot_on_ground.yaml",
+            "--realtime",
+            "--duration",
+            "14",
+            "--set",
+            "robot.gait.frequency_hz=2",
+            "--bag",
+            bag_arg,
+        ],
+    );
+    // The peer: 4 s reading the default gait, then 5 s commanding -2 Hz.
+    let peer = Command::new(common::python())
+        .arg(crate_dir().join("tests/python/dds_peer.py"))
+        .args(["4", "5", "-2.0"])
+        .env("ROS_DOMAIN_ID", domain.to_string())
+        .env("CYCLONEDDS_URI", CYCLONE_LOOPBACK)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start the Python peer");
+    let peer = json_line(&wait_output(peer, Duration::from_secs(60)), "dds_peer.py");
+    let node = json_line(&wait_output(node, Duration::from_secs(60)), "sandstep node");
+
+    let count = |t: &str| peer["counts"][t].as_u64().unwrap();
+    // 9 s at 100 Hz of sim time in real time; discovery eats the first few hundred ms.
+    for topic in ["clock", "joint_states", "odom"] {
+        assert!(
+            count(topic) > 500,
+            "peer got {} {topic}: {peer}",
+            count(topic)
+        );
+    }
+    assert_eq!(peer["clock_increasing"], true, "{peer}");
+    assert_eq!(peer["joint_lengths_ok"], true, "{peer}");
+    let names: Vec<&str> = peer["joint_names"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|n| n.as_str().unwrap())
+        .collect();
+    assert_eq!(names.len(), 6, "{names:?}");
+    assert!(names.contains(&"leg_front_left_joint"), "{names:?}");
+    assert_eq!(peer["odom_frame"], "odom");
+    assert_eq!(peer["odom_child"], "base_link");
+    let height = peer["body_height_m"].as_f64().unwrap();
+    assert!((0.0..0.2).contains(&height), "body height {height} m");
+    let before = peer["speed_before_m_s"].as_f64().unwrap();
+    let after = peer["speed_after_m_s"].as_f64().unwrap();
+    assert!(before > 0.01, "2 Hz forward: speed {before} m/s");
+    assert!(after < -0.01, "after the peer's -2 Hz: speed {after} m/s");
+
+    assert!(node["commands_received"].as_u64().unwrap() >= 20, "{node}");
+    let reader = BagReader::open(&bag).unwrap();
+    let gait = reader
+        .read::<sandstep::msgs::Float64>("/gait/frequency")
+        .unwrap();
+    assert!(gait.len() >= 20 && gait.iter().all(|(_, f)| f.data == -2.0));
+}
+
+/// Sends SIGINT to a running process.
+fn interrupt(child: &Child) {
+    let status = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+}
+
+/// Message counts per topic from a Python reader's JSON.
+fn python_counts(script: &str, bag: &Path) -> Vec<(String, u64)> {
+    let json = common::run_python_json(script, &[bag]);
+    let mut counts: Vec<(String, u64)> = json["topics"]
+        .as_object()
+        .unwrap()
+        .iter()
+        .map(|(name, t)| (name.clone(), t["messages"].as_array().unwrap().len() as u64))
+        .collect();
+    counts.sort();
+    counts
+}
+
+#[test]
+fn sigint_mid_run_leaves_a_bag_every_reader_opens() {
+    let domain = test_domain(1);
+    let bag_root = tempfile::tempdir().unwrap();
+    let bag: PathBuf = bag_root.path().join("interrupted");
+    // The robot on sand, coarse so that it moves within seconds; no --duration: runs until
+    // stopped.
+    let node = spawn_node(
+        domain,
+        &[
+            "config/robot_on_sand.yaml",
+            "--set",
+            "sand.dx_m=0.02",
+            "--bag",
+            bag.to_str().unwrap(),
+        ],
+    );
+    // Wait until the node has published for a while (its bag has an .mcap growing).
+    std::thread::sleep(Duration::from_secs(8));
+    interrupt(&node);
+    let out = wait_output(node, Duration::from_secs(60));
+    let summary = json_line(&out, "interrupted sandstep node");
+    let sim_time = summary["sim_time_s"].as_f64().unwrap();
+    assert!(sim_time > 0.05, "simulated only {sim_time} s");
+
+    let reader = BagReader::open(&bag).unwrap();
+    let mut ours: Vec<(String, u64)> = reader
+        .topics()
+        .iter()
+        .map(|t| (t.name.clone(), t.message_count))
+        .collect();
+    ours.sort();
+    let metadata = {
+        let mut m = reader
+            .metadata_counts()
+            .expect("metadata.yaml written on SIGINT");
+        m.sort();
+        m
+    };
+    // Topics that never got a message (the commands) are declared but empty.
+    let nonempty = |v: &[(String, u64)]| -> Vec<(String, u64)> {
+        v.iter().filter(|(_, n)| *n > 0).cloned().collect()
+    };
+    assert_eq!(
+        nonempty(&ours),
+        nonempty(&metadata),
+        "reader vs metadata.yaml"
+    );
+    let names: Vec<&str> = ours.iter().map(|(n, _)| n.as_str()).collect();
+    for topic in [
+        "/clock",
+        "/joint_states",
+        "/odom",
+        "/tf",
+        "/tf_static",
+        "/robot_description",
+        "/body_pose",
+        "/leg_wrenches/leg_front_left",
+        "/leg_wrenches/leg_rear_right",
+        "/sand/surface",
+    ] {
+        assert!(names.contains(&topic), "{topic} missing from {names:?}");
+    }
+    let odom = ours.iter().find(|(n, _)| n == "/odom").unwrap().1;
+    assert!(
+        (odom as f64 - sim_time * 100.0).abs() <= 2.0,
+        "{odom} odometry messages for {sim_time} s at 100 Hz"
+    );
+    assert_eq!(
+        nonempty(&python_counts("read_bag_mcap.py", &bag)),
+        nonempty(&ours)
+    );
+    assert_eq!(
+        nonempty(&python_counts("read_bag_rosbags.py", &bag)),
+        nonempty(&ours)
+    );
+    // The sand pushes the legs: some leg feels a force.
+    let wrenches = reader
+        .read::<sandstep::msgs::WrenchStamped>("/leg_wrenches/leg_front_left")
+        .unwrap();
+    let peak = wrenches
+        .iter()
+        .map(|(_, w)| {
+            let f = w.wrench.force;
+            (f.x * f.x + f.y * f.y + f.z * f.z).sqrt()
+        })
+        .fold(0.0, f64::max);
+    assert!(peak > 0.01, "peak leg force {peak} N");
+}
