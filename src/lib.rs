@@ -2,12 +2,14 @@
 //!
 //! Modules depend one way: [`mpm`] (the sand solver: no rigid bodies, no ROS) and [`robot`]
 //! (the hexapod in rapier: no sand, no ROS) are used by [`scene`] (YAML scenes, building and
-//! running them); [`analysis`] measures runs and [`bench`] prints throughput figures.
+//! running them); [`analysis`] measures runs, [`experiment`] sweeps leg curvature and gait
+//! frequency over scenes, and [`bench`] prints throughput figures.
 
 pub mod analysis;
 pub mod bag;
 pub mod bench;
 pub mod coupling;
+pub mod experiment;
 pub mod mpm;
 pub mod msgs;
 pub mod robot;

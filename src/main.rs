@@ -8,7 +8,7 @@ use std::sync::Arc;
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 
-use sandstep::scene::{run_scene, run_scene_observed, RunOptions, Scene};
+use sandstep::scene::{NoObserver, RunOptions, Scene};
 
 #[derive(Parser)]
 #[command(
@@ -67,15 +67,53 @@ enum Command {
         #[command(flatten)]
         bag: BagArgs,
     },
+    /// Sweep leg curvature, gait frequency and terrain model; measure the robot's speed.
+    Experiment {
+        /// Experiment file (YAML), e.g. config/experiments/leg_curvature.yaml.
+        experiment: PathBuf,
+        /// Output folder (default out/experiments/<name>-<YYYYmmdd-HHMMSS>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Change one experiment value, e.g. --set cycles=2 (repeatable).
+        #[arg(long = "set", value_name = "KEY.PATH=VALUE")]
+        overrides: Vec<String>,
+        /// Print results.json on stdout instead of the table.
+        #[arg(long)]
+        json: bool,
+        /// Continue the experiment in --out: keep its finished runs, run the rest.
+        #[arg(long, requires = "out")]
+        resume: bool,
+    },
     /// Write a hexapod URDF (and its leg meshes) from leg and body parameters.
     Urdf(sandstep::robot::UrdfArgs),
     /// Summarise a recorded bag: distance, speed per gait cycle, sinkage, leg forces, commands.
     Analyze {
         /// Bag directory (rosbag2, MCAP) or a bare .mcap file.
         bag: PathBuf,
+        /// Analyse from this time on (s since the first body pose; e.g. after settling).
+        #[arg(long, value_name = "S", default_value_t = 0.0)]
+        start: f64,
         /// Write trajectory, speed, joint-angle and leg-force plots (PNG and SVG) into DIR.
         #[arg(long, value_name = "DIR")]
         plots: Option<PathBuf>,
+        /// Print one JSON object on stdout instead of the human summary.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Calibrate resistive force theory: press a plate into the scene's MPM sand and fit zeta.
+    CalibrateRft {
+        /// Scene file (YAML) with the sand, e.g. config/robot_on_sand.yaml; the test's settings
+        /// are its terrain.rft.calibration.
+        scene: PathBuf,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Change one scene value, e.g. --set terrain.rft.calibration.dx_m=0.01 (repeatable).
+        #[arg(long = "set", value_name = "KEY.PATH=VALUE")]
+        overrides: Vec<String>,
         /// Print one JSON object on stdout instead of the human summary.
         #[arg(long)]
         json: bool,
@@ -182,26 +220,15 @@ fn run_recorded(
     opts: &RunOptions,
     bag_dir: Option<PathBuf>,
 ) -> anyhow::Result<sandstep::scene::RunSummary> {
-    let running = || format!("running {}", scene.file.display());
-    let Some(dir) = bag_dir else {
-        return run_scene(scene, opts).with_context(running);
-    };
-    let sim = sandstep::scene::Simulation::new(scene).with_context(running)?;
-    let writer = sandstep::bag::BagWriter::create(&dir)?;
-    let mut recorder = sandstep::ros::Publishing::new(scene, &sim, None, Some(writer))?;
-    drop(sim);
-    let outcome = run_scene_observed(scene, opts, &mut recorder);
-    let finished = recorder.finish();
-    let summary = outcome
-        .with_context(|| format!("{} (the bag so far is in {})", running(), dir.display()))?;
-    if let Some(bag) = finished? {
+    let run = sandstep::ros::record_run(scene, opts, bag_dir.as_deref(), &mut NoObserver)?;
+    if let Some(bag) = &run.bag {
         eprintln!(
             "bag: {} ({} messages)",
             bag.dir.display(),
             bag.message_count
         );
     }
-    Ok(summary)
+    Ok(run.summary)
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
@@ -288,9 +315,86 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 }
             }
         }
+        Command::Experiment {
+            experiment,
+            out,
+            threads,
+            overrides,
+            json,
+            resume,
+        } => {
+            set_threads(threads)?;
+            let experiment = sandstep::experiment::Experiment::load(&experiment, &overrides)?;
+            let opts = sandstep::experiment::ExperimentOptions {
+                out_dir: out,
+                progress: !json,
+                stop: Some(stop_flag()?),
+                resume,
+            };
+            let report = sandstep::experiment::run_experiment(&experiment, &opts)?;
+            if json {
+                println!("{}", serde_json::to_string(&report)?);
+            } else {
+                print!("{}", sandstep::experiment::report_table(&report));
+            }
+            anyhow::ensure!(
+                report.failed == 0,
+                "{} of {} runs failed (see {}/results.csv)",
+                report.failed,
+                report.runs.len(),
+                report.out_dir
+            );
+        }
         Command::Urdf(args) => sandstep::robot::run_urdf_command(&args)?,
-        Command::Analyze { bag, plots, json } => {
-            sandstep::analysis::bag::run_analyze_command(&bag, plots.as_deref(), json)?
+        Command::Analyze {
+            bag,
+            start,
+            plots,
+            json,
+        } => {
+            let opts = sandstep::analysis::bag::AnalysisOptions {
+                start_s: start,
+                max_cycles: None,
+            };
+            sandstep::analysis::bag::run_analyze_command(&bag, &opts, plots.as_deref(), json)?
+        }
+        Command::CalibrateRft {
+            scene,
+            threads,
+            overrides,
+            json,
+        } => {
+            set_threads(threads)?;
+            let scene = Scene::load(&scene, &overrides)?;
+            let c = sandstep::scene::calibrate_rft::calibrate_rft(&scene)?;
+            if json {
+                println!("{}", serde_json::to_string(&c)?);
+            } else {
+                println!(
+                    "{}: zeta = {:.4e} N/m^3 (R^2 {:.3}) for material {}: plate {:.1} mm square \
+                     ({:.3e} m^2) pressed at {:.3} m/s to {:.1} mm, dx {:.1} mm, {} particles, \
+                     {:.1} s wall",
+                    c.scene,
+                    c.zeta_n_m3,
+                    c.r_squared,
+                    c.material,
+                    c.plate_side_m * 1e3,
+                    c.plate_area_m2,
+                    c.speed_m_s,
+                    c.final_depth_m * 1e3,
+                    c.dx_m * 1e3,
+                    c.particles,
+                    c.wall_time_s
+                );
+                for cell in &c.cells {
+                    println!(
+                        "  depth {:5.1} mm: MPM {:.4} N, RFT {:.4} N",
+                        cell.depth_m * 1e3,
+                        cell.force_n,
+                        c.zeta_n_m3 * c.plate_area_m2 * cell.depth_m
+                    );
+                }
+            }
         }
         Command::Bench {
             particles,

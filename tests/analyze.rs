@@ -10,7 +10,9 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use nalgebra::{UnitQuaternion, Vector3 as Vec3};
-use sandstep::analysis::bag::{analyze_bag, BagAnalysis, SPEED_WINDOW_S};
+use sandstep::analysis::bag::{
+    analyze_bag, analyze_bag_with, AnalysisOptions, BagAnalysis, SPEED_WINDOW_S,
+};
 use sandstep::analysis::plots::write_plots;
 use sandstep::bag::{BagWriter, Durability};
 use sandstep::msgs::*;
@@ -664,6 +666,55 @@ fn cli_prints_json_and_writes_plots() {
     assert!(human.status.success());
     let text = String::from_utf8(human.stdout).unwrap();
     assert!(text.contains("mean speed 0.1000 m/s"), "{text}");
+}
+
+#[test]
+fn a_window_covers_the_time_from_its_start_and_its_first_cycles() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = bag_dir(&tmp);
+    write_bag(&dir, WALKING);
+    let whole = analyze_bag(&dir).unwrap();
+    let opts = AnalysisOptions {
+        start_s: 1.2,
+        max_cycles: Some(2),
+    };
+    let a = analyze_bag_with(&dir, &opts).unwrap();
+    let s = &a.summary;
+    assert_eq!(s.start_s, 1.2);
+    assert_near("duration", s.duration_s, 1.8, 1e-9);
+    assert_near("distance", s.distance_m, SPEED_M_S * 1.8, 1e-9);
+    assert_near("mean speed", s.mean_speed_m_s.unwrap(), SPEED_M_S, 1e-9);
+    // The joint turns at 2 Hz from angle 0: the first cycles from 1.2 s start at 1.5 and 2 s.
+    assert_eq!(s.gait_cycles, Some(2));
+    assert_near("first cycle", a.series.cycles[0].start_s, 1.5, 1e-9);
+    assert_near("second cycle", a.series.cycles[1].start_s, 2.0, 1e-9);
+    assert_near(
+        "per-cycle mean",
+        s.speed_per_cycle_mean_m_s.unwrap(),
+        SPEED_M_S,
+        1e-3 * SPEED_M_S,
+    );
+    // Forces and sinkage over the window only; the plots' series over the whole bag.
+    let samples = |a: &BagAnalysis| a.summary.leg_forces["leg_front_left"].samples;
+    assert!(samples(&a) < samples(&whole) && samples(&a) > 0);
+    assert!(s.sinkage_mean_m.is_some());
+    assert_eq!(a.series.body_position, whole.series.body_position);
+
+    let late = AnalysisOptions {
+        start_s: 3.5,
+        max_cycles: None,
+    };
+    let err = analyze_bag_with(&dir, &late).unwrap_err().to_string();
+    assert!(
+        err.contains("cannot start at 3.5 s: the body poses cover 0 to 3 s"),
+        "{err}"
+    );
+
+    let out = sandstep(&["analyze", dir.to_str().unwrap(), "--start", "1.2", "--json"]);
+    assert!(out.status.success());
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["start_s"], 1.2);
+    assert_eq!(v["gait_cycles"], 3, "the cycles from 1.5, 2 and 2.5 s");
 }
 
 #[test]

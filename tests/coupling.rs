@@ -9,6 +9,7 @@ use rapier3d::prelude::{
     ColliderBuilder, PhysicsWorld, Pose, RigidBodyBuilder, RigidBodyHandle, RigidBodySet,
     SharedShape,
 };
+use sandstep::coupling::plate::{depth_cell_means, fit_line, press_plate, PlatePress};
 use sandstep::coupling::{Coupling, CouplingMethod, CouplingMode, CpicSurface, SandCollider};
 use sandstep::mpm::Solver;
 use sandstep::scene::Scene;
@@ -184,76 +185,26 @@ fn plate_pressed_into_sand_resists_linearly_with_depth() {
     let settled = 0.05;
     sand.advance_to(settled).unwrap();
     // A 16 mm square plate, 1 mm thick: a sheet, pressed at 0.1 m/s to 20 mm depth.
-    let half = [0.008, 0.008, 0.0005];
-    let (speed, final_depth) = (0.1, 0.02);
-    let mut bodies = RigidBodySet::new();
-    let plate = bodies.insert(
-        RigidBodyBuilder::kinematic_velocity_based()
-            .translation(Vec3::new(0.025, 0.025, surface_z))
-            .linvel(Vec3::new(0.0, 0.0, -speed)),
-    );
-    let coupling = Coupling::new(
-        vec![collider(
-            "plate",
-            plate,
-            CpicSurface::thin_box(half),
-            CouplingMode::OneWay,
-        )],
-        &bodies,
-    )
-    .unwrap();
+    let final_depth = 0.02;
+    let press = PlatePress {
+        start_m: [0.025, 0.025, surface_z],
+        half_extents_m: [0.008, 0.008, 0.0005],
+        speed_m_s: 0.1,
+        final_depth_m: final_depth,
+        window_s: 0.001,
+        friction: 0.3,
+    };
     // (depth (m), upward force of the sand on the plate (N)) averaged over 1 ms windows.
-    let mut samples = Vec::new();
-    let window = 0.001;
-    let mut t = sand.time_s;
-    while t < settled + (final_depth / speed) as f64 {
-        t += window;
-        let (mut impulse, mut elapsed) = (0.0f64, 0.0f64);
-        while sand.time_s < t {
-            let dt = sand.next_dt().min(coupling.max_dt_s(&bodies, DX));
-            let j = coupling.substep(&mut sand, &mut bodies, dt).unwrap();
-            impulse += j[0].linear_n_s.z;
-            elapsed += dt as f64;
-            let rb = &mut bodies[plate];
-            let moved = rb.translation() + rb.linvel() * dt;
-            rb.set_translation(moved, true);
-        }
-        let depth = surface_z - bodies[plate].translation().z;
-        samples.push((depth as f64, impulse / elapsed));
-    }
+    let samples = press_plate(&mut sand, &press).unwrap();
     // The force saws with the grid period as the plate passes node planes (a CPIC artefact:
     // the incompatible nodes change at each plane), so fit the mean force over each cell of
-    // depth: (mid-depth (m), mean force (N)).
-    let cells: Vec<(f64, f64)> = (0..(final_depth / DX).round() as usize)
-        .map(|c| {
-            let (lo, hi) = (c as f64 * DX as f64, (c + 1) as f64 * DX as f64);
-            let inside: Vec<f64> = samples
-                .iter()
-                .filter(|(d, _)| *d >= lo && *d < hi)
-                .map(|(_, f)| *f)
-                .collect();
-            (
-                0.5 * (lo + hi),
-                inside.iter().sum::<f64>() / inside.len() as f64,
-            )
-        })
-        .collect();
-    let n = cells.len() as f64;
-    let (sx, sy) = cells
-        .iter()
-        .fold((0.0, 0.0), |(a, b), (x, y)| (a + x, b + y));
-    let (mx, my) = (sx / n, sy / n);
-    let sxx: f64 = cells.iter().map(|(x, _)| (x - mx).powi(2)).sum();
-    let sxy: f64 = cells.iter().map(|(x, y)| (x - mx) * (y - my)).sum();
-    let slope = sxy / sxx;
-    let residual: f64 = cells
-        .iter()
-        .map(|(x, y)| (y - my - slope * (x - mx)).powi(2))
-        .sum();
-    let total: f64 = cells.iter().map(|(_, y)| (y - my).powi(2)).sum();
-    let r2 = 1.0 - residual / total;
-    let intercept = my - slope * mx;
-    let table: Vec<String> = cells
+    // depth.
+    let cells = depth_cell_means(&samples, DX as f64, final_depth as f64);
+    let points: Vec<(f64, f64)> = cells.iter().map(|c| (c.depth_m, c.force_n)).collect();
+    let fit = fit_line(&points, false);
+    let (slope, intercept, r2) = (fit.slope, fit.intercept, fit.r_squared);
+    let mx = points.iter().map(|(x, _)| x).sum::<f64>() / points.len() as f64;
+    let table: Vec<String> = points
         .iter()
         .map(|(d, f)| format!("{:.1} mm: {f:.2} N", d * 1e3))
         .collect();

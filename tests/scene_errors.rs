@@ -141,3 +141,45 @@ fn malformed_yaml_and_bad_override() {
         &["--set sand.dx_m", "key.path=value"],
     );
 }
+
+#[test]
+fn terrain_values_out_of_range() {
+    let robot_scene = include_str!("../config/robot_on_sand.yaml");
+    for (text, set, field) in [
+        (
+            robot_scene,
+            "terrain.rft.zeta_n_m3=0",
+            "terrain.rft.zeta_n_m3",
+        ),
+        (
+            robot_scene,
+            "terrain.rft.element_size_m=-1",
+            "terrain.rft.element_size_m",
+        ),
+        (
+            robot_scene,
+            "terrain.rft.max_dt_s=.nan",
+            "terrain.rft.max_dt_s",
+        ),
+        (
+            robot_scene,
+            "terrain.rft.surface_height_m=-0.1",
+            "terrain.rft.surface_height_m",
+        ),
+        (
+            robot_scene,
+            "terrain.rft.calibration.plate_thickness_m=0.01",
+            "terrain.rft.calibration.plate_thickness_m",
+        ),
+        (
+            robot_scene,
+            "terrain.rft.calibration.material=gravel",
+            "terrain.rft.calibration.material",
+        ),
+        (robot_scene, "terrain.model=dem", "terrain.model"),
+        // RFT acts on a robot's bodies: a sand-only scene cannot use it.
+        (SCENE, "terrain.model=rft", "terrain.model"),
+    ] {
+        assert_names(&error_of(text, &[set]), &["scenes/test.yaml", field]);
+    }
+}

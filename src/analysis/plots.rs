@@ -18,18 +18,18 @@ use plotters::style::{register_font, FontStyle};
 use super::bag::{BagAnalysis, BagSeries, NamedSeries};
 
 /// Pixel size of the PNGs and of the SVG canvases.
-const PLOT_SIZE: (u32, u32) = (1200, 720);
-const CAPTION_FONT_SIZE: u32 = 28;
-const AXIS_DESC_FONT_SIZE: u32 = 20;
-const LABEL_FONT_SIZE: u32 = 16;
-const LEGEND_FONT_SIZE: u32 = 16;
-const MARGIN_PX: u32 = 20;
-const X_LABEL_AREA_PX: u32 = 55;
-const Y_LABEL_AREA_PX: u32 = 85;
-const LINE_WIDTH_PX: u32 = 2;
-const MARKER_RADIUS_PX: u32 = 6;
+pub(crate) const PLOT_SIZE: (u32, u32) = (1200, 720);
+pub(crate) const CAPTION_FONT_SIZE: u32 = 28;
+pub(crate) const AXIS_DESC_FONT_SIZE: u32 = 20;
+pub(crate) const LABEL_FONT_SIZE: u32 = 16;
+pub(crate) const LEGEND_FONT_SIZE: u32 = 16;
+pub(crate) const MARGIN_PX: u32 = 20;
+pub(crate) const X_LABEL_AREA_PX: u32 = 55;
+pub(crate) const Y_LABEL_AREA_PX: u32 = 85;
+pub(crate) const LINE_WIDTH_PX: u32 = 2;
+pub(crate) const MARKER_RADIUS_PX: u32 = 6;
 /// Length of the line sample in a legend entry.
-const LEGEND_LINE_PX: i32 = 20;
+pub(crate) const LEGEND_LINE_PX: i32 = 20;
 /// Fraction of a data span added on each side of an axis.
 const AXIS_PADDING: f64 = 0.05;
 /// Smallest span (in data units) of an axis, so a constant series still gets an axis.
@@ -65,7 +65,7 @@ pub enum PlotError {
 }
 
 /// Registers the embedded font for every family plotters uses, once per process.
-fn register_fonts() -> Result<(), PlotError> {
+pub(crate) fn register_fonts() -> Result<(), PlotError> {
     static REGISTERED: OnceLock<bool> = OnceLock::new();
     let ok = *REGISTERED.get_or_init(|| {
         FONT_FAMILIES
@@ -186,13 +186,14 @@ pub fn write_plots(analysis: &BagAnalysis, dir: &Path) -> Result<PlotsWritten, P
     Ok(written)
 }
 
-type DrawResult<DB> = Result<(), DrawingAreaErrorKind<<DB as DrawingBackend>::ErrorType>>;
+pub(crate) type DrawResult<DB> =
+    Result<(), DrawingAreaErrorKind<<DB as DrawingBackend>::ErrorType>>;
 
 /// A chart with f64 axes.
-type XyChart<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+pub(crate) type XyChart<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
 /// `[min, max]` of `values` padded by [`AXIS_PADDING`], at least [`MIN_AXIS_SPAN`] wide.
-fn padded_range(values: impl IntoIterator<Item = f64>) -> Range<f64> {
+pub(crate) fn padded_range(values: impl IntoIterator<Item = f64>) -> Range<f64> {
     let (lo, hi) = values
         .into_iter()
         .filter(|v| v.is_finite())
@@ -207,16 +208,16 @@ fn padded_range(values: impl IntoIterator<Item = f64>) -> Range<f64> {
     centre - half..centre + half
 }
 
-fn line_style(color: RGBAColor) -> ShapeStyle {
+pub(crate) fn line_style(color: RGBAColor) -> ShapeStyle {
     ShapeStyle::from(color).stroke_width(LINE_WIDTH_PX)
 }
 
-fn legend_line(color: RGBAColor) -> impl Fn((i32, i32)) -> PathElement<(i32, i32)> {
+pub(crate) fn legend_line(color: RGBAColor) -> impl Fn((i32, i32)) -> PathElement<(i32, i32)> {
     move |(x, y)| PathElement::new(vec![(x, y), (x + LEGEND_LINE_PX, y)], line_style(color))
 }
 
 /// The chart frame shared by every plot: caption, label areas and labelled axes.
-fn chart<'a, DB: DrawingBackend>(
+pub(crate) fn chart<'a, DB: DrawingBackend>(
     root: &'a DrawingArea<DB, Shift>,
     caption: &str,
     x: Range<f64>,
@@ -240,7 +241,9 @@ fn chart<'a, DB: DrawingBackend>(
     Ok(chart)
 }
 
-fn draw_legend<'a, DB: DrawingBackend + 'a>(chart: &mut XyChart<'a, DB>) -> DrawResult<DB> {
+pub(crate) fn draw_legend<'a, DB: DrawingBackend + 'a>(
+    chart: &mut XyChart<'a, DB>,
+) -> DrawResult<DB> {
     chart
         .configure_series_labels()
         .position(SeriesLabelPosition::UpperLeft)

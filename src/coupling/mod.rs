@@ -8,6 +8,8 @@
 //! return the impulse each collider received; two-way colliders get it as a force over the
 //! substep, to be applied by the rapier step of the same dt that the caller takes next.
 
+pub mod plate;
+pub mod rft;
 pub mod surface;
 
 use nalgebra::Vector3;
@@ -262,8 +264,10 @@ pub fn body_surfaces(
 
 /// One sheet through the mid-planes of thin boxes `(pose, half extents)` laid end to end, in
 /// order: a strip whose cross-lines sit at the chain's ends and halfway between neighbouring box
-/// ends. Each box's thinnest axis is its thickness; of the other two, the one closer to the
-/// line to its neighbour runs along the chain.
+/// ends. The box axis closest to the line to its neighbour runs along the chain; of the other
+/// two, the longer is the width, the shorter the thickness. (Not by size alone: the boxes of a
+/// straight or slightly curved leg are shorter along the chain than the leg is thick.) A chain
+/// of one box runs along its longest axis, across its middle one.
 pub fn box_chain_sheet(boxes: &[(Pose, Vec3)]) -> Result<CpicSurface, String> {
     if boxes.is_empty() {
         return Err("no boxes".into());
@@ -283,11 +287,15 @@ pub fn box_chain_sheet(boxes: &[(Pose, Vec3)]) -> Result<CpicSurface, String> {
         order.sort_by(|&a, &b| h[a].total_cmp(&h[b]));
         let axis = |k: usize| pose.rotation * Vec3::AXES[order[k]] * h[order[k]];
         let dir = forward(i).unwrap_or(axis(2));
-        let (along, across) = if axis(2).dot(dir).abs() >= axis(1).dot(dir).abs() {
-            (axis(2), axis(1))
-        } else {
-            (axis(1), axis(2))
-        };
+        // The axis closest to the chain's direction (by the cosine), then the longer of the
+        // other two (`order` is by size).
+        let alignment = |k: usize| (pose.rotation * Vec3::AXES[order[k]]).dot(dir).abs();
+        let k_along = (0..3)
+            .rev()
+            .max_by(|&a, &b| alignment(a).total_cmp(&alignment(b)))
+            .expect("three axes");
+        let k_across = if k_along == 2 { 1 } else { 2 };
+        let (along, across) = (axis(k_along), axis(k_across));
         let along = if along.dot(dir) < 0.0 { -along } else { along };
         let across = match parts.last() {
             Some((_, _, previous)) if across.dot(*previous) < 0.0 => -across,

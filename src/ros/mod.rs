@@ -9,9 +9,11 @@ pub mod convert;
 pub mod node;
 pub mod publishing;
 pub mod qos;
+pub mod record;
 
 pub use node::{run_node, NodeError, NodeRunOptions, NodeSummary};
 pub use publishing::{default_bag_dir, Publishing};
+pub use record::{record_run, RecordError, RecordedRun};
 
 use crate::msgs::{
     Clock, Float64, Float64MultiArray, JointState, Odometry, PointCloud2, PoseStamped,

@@ -152,7 +152,7 @@ impl Publishing {
             .map(|l| l.link)
             .collect();
         let mut leg_wrenches = Vec::new();
-        if sim.solver().is_some() {
+        if sim.has_leg_wrenches() {
             for link in &leg_links {
                 leg_wrenches.push(make!(
                     &format!("{LEG_WRENCHES_TOPIC}/{link}"),

@@ -28,6 +28,7 @@ pub fn validate(scene: &Scene) -> Result<(), SceneError> {
         robot.validate(&scene.file)?;
     }
     validate_node(scene)?;
+    super::terrain::validate(scene)?;
     if !(c.coupling.friction >= 0.0 && c.coupling.friction.is_finite()) {
         return Err(scene.invalid(
             "coupling.friction",

@@ -33,6 +33,10 @@ pub struct SceneConfig {
     /// The ROS 2 node and its recording (`sandstep node`, and the bag of `sandstep run`).
     #[serde(default)]
     pub node: NodeConfig,
+    /// What the robot walks on: the MPM `sand` (default) or resistive force theory
+    /// (`docs/scenes.md`, `docs/physics.md`).
+    #[serde(default)]
+    pub terrain: super::terrain::TerrainConfig,
 }
 
 fn default_gravity() -> [f32; 3] {

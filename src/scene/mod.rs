@@ -1,12 +1,14 @@
 //! Scenes: YAML files in `config/`, loaded, checked and turned into a running simulation.
 
 pub mod build;
+pub mod calibrate_rft;
 pub mod config;
-mod overrides;
+pub(crate) mod overrides;
 pub mod ply;
 pub mod robot_sand;
 pub mod run;
 pub mod simulation;
+pub mod terrain;
 
 use std::path::{Path, PathBuf};
 
@@ -55,28 +57,14 @@ impl Scene {
 
     /// Parses scene text; `file` is only used to name the source in errors.
     pub fn from_yaml(text: &str, file: &Path, overrides: &[String]) -> Result<Scene, SceneError> {
-        let parse_error = |path: String, inner: String| SceneError::Parse {
-            file: file.to_path_buf(),
-            message: if path == "." {
-                inner
-            } else {
-                format!("{path}: {inner}")
-            },
-        };
-        let config: SceneConfig = if overrides.is_empty() {
-            // Straight from the text, so errors carry line and column.
-            let de = serde_yaml_ng::Deserializer::from_str(text);
-            serde_path_to_error::deserialize(de)
-                .map_err(|e| parse_error(e.path().to_string(), e.inner().to_string()))?
-        } else {
-            let mut value: serde_yaml_ng::Value = serde_yaml_ng::from_str(text)
-                .map_err(|e| parse_error(".".into(), e.to_string()))?;
-            for assignment in overrides {
-                overrides::apply(&mut value, assignment)?;
-            }
-            serde_path_to_error::deserialize(value)
-                .map_err(|e| parse_error(e.path().to_string(), e.inner().to_string()))?
-        };
+        let config: SceneConfig =
+            overrides::deserialize_with_overrides(text, overrides).map_err(|e| match e {
+                overrides::YamlProblem::Parse { path, message } => SceneError::Parse {
+                    file: file.to_path_buf(),
+                    message: overrides::YamlProblem::parse_message(&path, &message),
+                },
+                overrides::YamlProblem::Override(e) => e,
+            })?;
         let scene = Scene {
             file: file.to_path_buf(),
             config,

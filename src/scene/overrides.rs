@@ -1,8 +1,51 @@
 //! `--set key.path=value`: changes one value of the parsed YAML before it is checked.
 
+use serde::de::DeserializeOwned;
 use serde_yaml_ng::Value;
 
 use super::SceneError;
+
+/// Why [`deserialize_with_overrides`] failed.
+#[derive(Debug)]
+pub enum YamlProblem {
+    /// The text is not YAML, or does not fit the type: the path of the offending field (`.`
+    /// for the document) and the message.
+    Parse { path: String, message: String },
+    /// An assignment could not be applied.
+    Override(SceneError),
+}
+
+impl YamlProblem {
+    /// `path: message` (the message alone for the document), for errors that name the file.
+    pub fn parse_message(path: &str, message: &str) -> String {
+        if path == "." {
+            message.to_string()
+        } else {
+            format!("{path}: {message}")
+        }
+    }
+}
+
+/// Deserializes YAML `text` after applying the `key.path=value` assignments in order. Without
+/// assignments it reads the text directly, so that errors carry line and column.
+pub fn deserialize_with_overrides<T: DeserializeOwned>(
+    text: &str,
+    overrides: &[String],
+) -> Result<T, YamlProblem> {
+    let parse = |path: String, message: String| YamlProblem::Parse { path, message };
+    if overrides.is_empty() {
+        let de = serde_yaml_ng::Deserializer::from_str(text);
+        return serde_path_to_error::deserialize(de)
+            .map_err(|e| parse(e.path().to_string(), e.inner().to_string()));
+    }
+    let mut value: Value =
+        serde_yaml_ng::from_str(text).map_err(|e| parse(".".into(), e.to_string()))?;
+    for assignment in overrides {
+        apply(&mut value, assignment).map_err(YamlProblem::Override)?;
+    }
+    serde_path_to_error::deserialize(value)
+        .map_err(|e| parse(e.path().to_string(), e.inner().to_string()))
+}
 
 /// Applies `key.path=value` to a YAML document. Path segments are map keys, or indices into
 /// sequences; missing map keys are created (unknown ones are then rejected by the parser).

@@ -63,6 +63,8 @@ pub enum RunError {
     Empty(String),
     #[error(transparent)]
     Coupling(#[from] crate::coupling::CouplingError),
+    #[error(transparent)]
+    Rft(#[from] crate::coupling::rft::RftError),
     #[error(
         "the robot blew up at t = {time_s:.6} s: body at {position_m:?} m moving at {speed_m_s:.3e} m/s; \
          reduce robot.physics.max_dt_s or check the URDF's masses and inertias"
@@ -205,6 +207,14 @@ pub fn run_scene_observed(
         } else {
             metrics.insert("total_mass_kg".into(), json!(solver.particles.total_mass()));
         }
+    }
+    if let (Some(robot), Some(terrain)) = (sim.robot(), sim.rft_terrain()) {
+        metrics.insert(
+            "mean_sinkage_m".into(),
+            json!(sinkage_sum / frames_done.max(1) as f64),
+        );
+        metrics.insert("robot_mass_kg".into(), json!(robot.total_mass_kg()));
+        metrics.insert("zeta_n_m3".into(), json!(terrain.params().zeta_n_m3));
     }
     Ok(RunSummary::of_simulation(
         &config.name,

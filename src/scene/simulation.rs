@@ -1,14 +1,16 @@
 //! One stepping interface over every kind of scene: sand alone, the robot on rigid ground, the
-//! robot on sand. The node and the headless run both drive a [`Simulation`] and read its plain
+//! robot on sand (MPM, or resistive force theory with `terrain.model: rft`). The node and the headless run both drive a [`Simulation`] and read its plain
 //! outputs (robot state, link poses, leg wrenches, the sand surface); they never see rapier or
 //! the solver's internals.
 
 use nalgebra::{UnitQuaternion, Vector3};
-use rapier3d::prelude::RigidBodyHandle;
+use rapier3d::prelude::{RigidBody, RigidBodyHandle};
 
 use super::robot_sand::{leg_sinkage_m, robot_coupling};
 use super::run::RunError;
+use super::terrain::{robot_rft_terrain, TerrainModel};
 use super::Scene;
+use crate::coupling::rft::{BodyWrench, RftTerrain};
 use crate::coupling::Coupling;
 use crate::mpm::Solver;
 use crate::robot::geometry::{BODY_LINK, LEGS};
@@ -17,6 +19,8 @@ use crate::robot::{GaitCommand, RobotSim, RobotState};
 /// Fastest the robot's body may move before the run is stopped as blown up (m/s): far above
 /// anything a walking robot does, far below what a diverging rigid-body solve produces.
 const ROBOT_BLOWUP_SPEED_M_S: f64 = 100.0;
+/// A frame that is a whole number of RFT steps up to this relative round-off takes that number.
+const STEP_COUNT_SLACK: f64 = 1e-6;
 
 /// Pose of one link in the world (`odom`) frame.
 #[derive(Clone, Debug, PartialEq)]
@@ -66,7 +70,23 @@ enum Kind {
         /// Simulated time the impulses were summed over (s).
         impulse_time_s: f64,
     },
+    /// The robot on resistive force theory terrain (`terrain.model: rft`): the terrain's forces
+    /// are recomputed before every rapier step.
+    RobotOnRft {
+        robot: Box<RobotSim>,
+        terrain: RftTerrain,
+        /// Largest step with one set of RFT forces (s).
+        max_dt_s: f64,
+        /// Per leg, in [`LEGS`] order.
+        leg_impulses: Vec<ImpulseSum>,
+        /// Simulated time the impulses were summed over (s).
+        impulse_time_s: f64,
+    },
 }
+
+/// Half side of the square of flat RFT surface that [`Simulation::sand_surface`] reports
+/// around the robot (m): the robot's footprint with margin.
+pub const RFT_SURFACE_HALF_SIDE_M: f32 = 0.2;
 
 /// A scene, built and ready to step.
 pub struct Simulation {
@@ -81,6 +101,22 @@ impl Simulation {
     /// Builds the scene's sand, robot and coupling at time 0.
     pub fn new(scene: &Scene) -> Result<Self, RunError> {
         let config = &scene.config;
+        if let (Some(robot_cfg), TerrainModel::Rft) = (&config.robot, config.terrain.model) {
+            // The `sand` section is not simulated: no solver, no particles.
+            let robot = Box::new(RobotSim::new(robot_cfg, config.gravity_m_s2)?);
+            let terrain = robot_rft_terrain(&robot, &config.terrain.rft)?;
+            return Ok(Simulation {
+                kind: Kind::RobotOnRft {
+                    max_dt_s: config.terrain.rft.max_dt_s.min(robot.max_dt_s()),
+                    robot,
+                    terrain,
+                    leg_impulses: vec![ImpulseSum::default(); LEGS.len()],
+                    impulse_time_s: 0.0,
+                },
+                steps: 0,
+                particle_steps: 0,
+            });
+        }
         let kind = match (&config.robot, scene.build_solver()) {
             (None, Some(solver)) => Kind::Sand { solver },
             (None, None) => return Err(RunError::Empty(scene.file.display().to_string())),
@@ -117,7 +153,7 @@ impl Simulation {
     pub fn time_s(&self) -> f64 {
         match &self.kind {
             Kind::Sand { solver } | Kind::RobotOnSand { solver, .. } => solver.time_s,
-            Kind::RobotOnGround { robot } => robot.time_s(),
+            Kind::RobotOnGround { robot } | Kind::RobotOnRft { robot, .. } => robot.time_s(),
         }
     }
 
@@ -162,6 +198,32 @@ impl Simulation {
                     self.particle_steps += solver.particles.len() as u64;
                 }
             }
+            Kind::RobotOnRft {
+                robot,
+                terrain,
+                max_dt_s,
+                leg_impulses,
+                impulse_time_s,
+            } => {
+                let remaining = target_s - robot.time_s();
+                if remaining > 0.0 {
+                    // Equal steps of at most max_dt_s, each with the forces of its start.
+                    let steps = (remaining / *max_dt_s * (1.0 - STEP_COUNT_SLACK))
+                        .ceil()
+                        .max(1.0) as u64;
+                    let dt = remaining / steps as f64;
+                    for _ in 0..steps {
+                        let world = robot.world_mut();
+                        let wrenches =
+                            terrain.apply(&mut world.bodies, &mut world.multibody_joints, dt);
+                        accumulate_rft_leg_impulses(robot, terrain, &wrenches, dt, leg_impulses);
+                        *impulse_time_s += dt;
+                        robot.step(dt as f32);
+                        check_robot(robot)?;
+                        self.steps += 1;
+                    }
+                }
+            }
         }
         Ok(())
     }
@@ -177,14 +239,18 @@ impl Simulation {
     pub fn robot(&self) -> Option<&RobotSim> {
         match &self.kind {
             Kind::Sand { .. } => None,
-            Kind::RobotOnGround { robot } | Kind::RobotOnSand { robot, .. } => Some(robot),
+            Kind::RobotOnGround { robot }
+            | Kind::RobotOnSand { robot, .. }
+            | Kind::RobotOnRft { robot, .. } => Some(robot),
         }
     }
 
     fn robot_mut(&mut self) -> Option<&mut RobotSim> {
         match &mut self.kind {
             Kind::Sand { .. } => None,
-            Kind::RobotOnGround { robot } | Kind::RobotOnSand { robot, .. } => Some(robot),
+            Kind::RobotOnGround { robot }
+            | Kind::RobotOnSand { robot, .. }
+            | Kind::RobotOnRft { robot, .. } => Some(robot),
         }
     }
 
@@ -192,7 +258,7 @@ impl Simulation {
     pub fn solver(&self) -> Option<&Solver> {
         match &self.kind {
             Kind::Sand { solver } | Kind::RobotOnSand { solver, .. } => Some(solver),
-            Kind::RobotOnGround { .. } => None,
+            Kind::RobotOnGround { .. } | Kind::RobotOnRft { .. } => None,
         }
     }
 
@@ -225,17 +291,41 @@ impl Simulation {
             .collect()
     }
 
-    /// The sand's mean wrench on each leg since the last call, in each leg link's frame; `None`
-    /// without sand, and zero wrenches when no time has passed. Resets the sums.
+    /// The RFT terrain, if the robot walks on one (`terrain.model: rft`).
+    pub fn rft_terrain(&self) -> Option<&RftTerrain> {
+        match &self.kind {
+            Kind::RobotOnRft { terrain, .. } => Some(terrain),
+            _ => None,
+        }
+    }
+
+    /// Whether [`Self::take_leg_wrenches`] reports the terrain's forces on the legs (the robot on
+    /// MPM sand or on RFT terrain).
+    pub fn has_leg_wrenches(&self) -> bool {
+        matches!(
+            self.kind,
+            Kind::RobotOnSand { .. } | Kind::RobotOnRft { .. }
+        )
+    }
+
+    /// The terrain's (MPM sand's or RFT's) mean wrench on each leg since the last call, in each
+    /// leg link's frame; `None` on rigid ground or without a robot, and zero wrenches when no
+    /// time has passed. Resets the sums.
     pub fn take_leg_wrenches(&mut self) -> Option<Vec<LegWrench>> {
-        let Kind::RobotOnSand {
-            robot,
-            leg_impulses,
-            impulse_time_s,
-            ..
-        } = &mut self.kind
-        else {
-            return None;
+        let (robot, leg_impulses, impulse_time_s) = match &mut self.kind {
+            Kind::RobotOnSand {
+                robot,
+                leg_impulses,
+                impulse_time_s,
+                ..
+            }
+            | Kind::RobotOnRft {
+                robot,
+                leg_impulses,
+                impulse_time_s,
+                ..
+            } => (robot, leg_impulses, impulse_time_s),
+            _ => return None,
         };
         let elapsed = *impulse_time_s;
         let bodies = &robot.world().bodies;
@@ -271,8 +361,22 @@ impl Simulation {
     }
 
     /// The top of the sand: for each `cell_m` x `cell_m` column that holds particles, the
-    /// highest particle (x, y of the column centre, z of that particle) (m). `None` without sand.
+    /// highest particle (x, y of the column centre, z of that particle) (m). On RFT terrain, the
+    /// flat surface over the square of half side [`RFT_SURFACE_HALF_SIDE_M`] centred under the
+    /// robot. `None` without sand or RFT terrain.
     pub fn sand_surface(&self, cell_m: f32) -> Option<Vec<[f32; 3]>> {
+        if let Kind::RobotOnRft { robot, terrain, .. } = &self.kind {
+            let centre = robot.world().bodies[robot.body_handle()].translation();
+            let z = terrain.params().surface_height_m as f32;
+            let n = (RFT_SURFACE_HALF_SIDE_M / cell_m).ceil().max(1.0) as i32;
+            let at = |k: i32| (k as f32 + 0.5) * cell_m;
+            return Some(
+                (-n..n)
+                    .flat_map(|j| (-n..n).map(move |i| (i, j)))
+                    .map(|(i, j)| [centre.x + at(i), centre.y + at(j), z])
+                    .collect(),
+            );
+        }
         let solver = self.solver()?;
         let positions = &solver.particles.position;
         let (mut min, mut max) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
@@ -308,12 +412,17 @@ impl Simulation {
         )
     }
 
-    /// Depth of the deepest leg point below the initial sand surface (m); `None` without sand.
+    /// Depth of the deepest leg point below the initial sand surface (MPM) or the RFT surface
+    /// (m); `None` without sand or RFT terrain.
     pub fn leg_sinkage_m(&self) -> Option<f64> {
         match &self.kind {
             Kind::RobotOnSand {
                 robot, surface_z_m, ..
             } => Some(leg_sinkage_m(robot, *surface_z_m)),
+            Kind::RobotOnRft { robot, terrain, .. } => Some(leg_sinkage_m(
+                robot,
+                terrain.params().surface_height_m as f32,
+            )),
             _ => None,
         }
     }
@@ -339,21 +448,55 @@ fn accumulate_leg_impulses(
 ) {
     let bodies = &robot.world().bodies;
     for (leg, &h) in robot.leg_handles().iter().enumerate() {
-        let rb = &bodies[h];
-        let com = rb.center_of_mass();
-        let origin = rb.position().translation;
-        let arm = Vector3::new(
-            (com.x - origin.x) as f64,
-            (com.y - origin.y) as f64,
-            (com.z - origin.z) as f64,
-        );
         for (c, j) in coupling.colliders().iter().zip(impulses) {
             if c.body == h {
-                sums[leg].linear_n_s += j.linear_n_s;
-                sums[leg].angular_n_m_s += j.angular_n_m_s + arm.cross(&j.linear_n_s);
+                add_at_link_origin(&bodies[h], j.linear_n_s, j.angular_n_m_s, &mut sums[leg]);
             }
         }
     }
+}
+
+/// Adds one step's RFT wrenches on each leg, held for `dt_s` seconds, like
+/// [`accumulate_leg_impulses`].
+fn accumulate_rft_leg_impulses(
+    robot: &RobotSim,
+    terrain: &RftTerrain,
+    wrenches: &[BodyWrench],
+    dt_s: f64,
+    sums: &mut [ImpulseSum],
+) {
+    let bodies = &robot.world().bodies;
+    for (leg, &h) in robot.leg_handles().iter().enumerate() {
+        for (b, w) in terrain.bodies().iter().zip(wrenches) {
+            if b.body == h {
+                add_at_link_origin(
+                    &bodies[h],
+                    w.force_n * dt_s,
+                    w.torque_n_m * dt_s,
+                    &mut sums[leg],
+                );
+            }
+        }
+    }
+}
+
+/// Adds an impulse (N s) and an angular impulse about the body's centre of mass (N m s), world
+/// axes, to `sum`, moved to the link origin: `L_o = L_com + (com - o) x J`.
+fn add_at_link_origin(
+    rb: &RigidBody,
+    linear_n_s: Vector3<f64>,
+    angular_com_n_m_s: Vector3<f64>,
+    sum: &mut ImpulseSum,
+) {
+    let com = rb.center_of_mass();
+    let origin = rb.position().translation;
+    let arm = Vector3::new(
+        (com.x - origin.x) as f64,
+        (com.y - origin.y) as f64,
+        (com.z - origin.z) as f64,
+    );
+    sum.linear_n_s += linear_n_s;
+    sum.angular_n_m_s += angular_com_n_m_s + arm.cross(&linear_n_s);
 }
 
 /// Stops a robot whose body has left the finite or plausible range.

@@ -104,6 +104,29 @@ pub enum AnalysisError {
         /// `name (type, count)` of each topic in the bag.
         topics: Vec<String>,
     },
+    #[error(
+        "{}: the analysis cannot start at {start_s} s: the body poses cover 0 to {end_s} s",
+        path.display()
+    )]
+    Window {
+        path: PathBuf,
+        start_s: f64,
+        end_s: f64,
+    },
+}
+
+/// Which part of a bag to analyse.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct AnalysisOptions {
+    /// Start of the analysed window (s since the first body pose; default 0, the whole bag).
+    /// Every number of the summary (distance, speeds, gait cycles, heights, tilt, sinkage,
+    /// leg forces) covers the time from here to the last body pose; only cycles that start
+    /// here or later count. The series behind the plots cover the whole bag, except `cycles`,
+    /// which are the counted ones. Commands and topics always cover the whole bag.
+    pub start_s: f64,
+    /// Count at most this many complete gait cycles, the first ones of the window
+    /// (default: all).
+    pub max_cycles: Option<usize>,
 }
 
 impl From<BagError> for AnalysisError {
@@ -167,6 +190,8 @@ pub struct CommandSummary {
 pub struct BagSummary {
     /// The bag directory or MCAP file analysed.
     pub bag: String,
+    /// Start of the analysed window (s since the first body pose; 0 = the whole bag).
+    pub start_s: f64,
     /// Topic the body pose came from (`/odom`, `/body_pose`, another Odometry topic or `/tf`).
     pub pose_source: String,
     /// Time from the first to the last body pose (s).
@@ -410,8 +435,13 @@ fn non_empty_or(name: &str, default: &str) -> String {
     if name.is_empty() { default } else { name }.to_string()
 }
 
-/// Analyses the bag directory or MCAP file at `path`.
+/// Analyses the whole bag directory or MCAP file at `path`.
 pub fn analyze_bag(path: &Path) -> Result<BagAnalysis, AnalysisError> {
+    analyze_bag_with(path, &AnalysisOptions::default())
+}
+
+/// Analyses the bag directory or MCAP file at `path` from `opts.start_s` on.
+pub fn analyze_bag_with(path: &Path, opts: &AnalysisOptions) -> Result<BagAnalysis, AnalysisError> {
     let reader = BagReader::open(path)?;
     check_types(&reader)?;
     let mut notes = Vec::new();
@@ -497,7 +527,14 @@ pub fn analyze_bag(path: &Path) -> Result<BagAnalysis, AnalysisError> {
         body_frame,
     };
 
-    let mut summary = pose_summary(path, &source, &body.pose);
+    let start_s = opts.start_s;
+    let window = pose_window(&body.pose, start_s).ok_or_else(|| AnalysisError::Window {
+        path: path.to_path_buf(),
+        start_s,
+        end_s: body.pose[body.pose.len() - 1].0,
+    })?;
+    let mut summary = pose_summary(path, &source, &window);
+    summary.start_s = start_s;
     let mut series = BagSeries {
         body_position: body
             .pose
@@ -512,7 +549,11 @@ pub fn analyze_bag(path: &Path) -> Result<BagAnalysis, AnalysisError> {
     series.joint_angles = joint_angle_series(&joint_states, &time);
     if let Some(first_joint) = series.joint_angles.first() {
         let boundaries = cycle_boundaries(&first_joint.points);
-        series.cycles = cycles::cycles(&boundaries, &body.pose);
+        series.cycles = cycles::cycles(&boundaries, &body.pose)
+            .into_iter()
+            .filter(|c| c.start_s >= start_s - WINDOW_TOLERANCE_S)
+            .take(opts.max_cycles.unwrap_or(usize::MAX))
+            .collect();
         summary.gait_joint = Some(first_joint.name.clone());
         summary.gait_cycles = Some(series.cycles.len());
         summary.speed_per_cycle_m_s = series.cycles.iter().map(|c| c.speed_m_s).collect();
@@ -532,7 +573,8 @@ pub fn analyze_bag(path: &Path) -> Result<BagAnalysis, AnalysisError> {
             continue;
         };
         let wrenches = read_optional::<msgs::WrenchStamped>(&reader, topic)?;
-        if let Some((force_summary, force_series)) = leg_forces(topic, leg, &wrenches, &time, &body)
+        if let Some((force_summary, force_series)) =
+            leg_forces(topic, leg, &wrenches, &time, &body, start_s)
         {
             summary.leg_forces.insert(leg.to_string(), force_summary);
             series.leg_forces.push(force_series);
@@ -541,7 +583,7 @@ pub fn analyze_bag(path: &Path) -> Result<BagAnalysis, AnalysisError> {
     if summary.leg_forces.is_empty() {
         notes.push(format!("leg forces: no {LEG_WRENCHES_PREFIX}* messages"));
     }
-    sinkage_summary(&reader, &body, &mut summary, &mut notes)?;
+    sinkage_summary(&reader, &body, start_s, &mut summary, &mut notes)?;
 
     summary.commands = command_summaries(&reader)?;
     summary.topics = reader.topics().iter().map(TopicSummary::from).collect();
@@ -576,6 +618,32 @@ impl BodyTrack {
     }
 }
 
+/// Times within this much (s) before the window's start count as in it.
+const WINDOW_TOLERANCE_S: f64 = 1e-9;
+
+/// The body poses from `start_s` on, beginning with the pose interpolated at `start_s`;
+/// `None` if `start_s` lies after the last pose (or is not finite). All poses for a start at
+/// or before the first.
+fn pose_window(pose: &[TimedPose], start_s: f64) -> Option<Vec<TimedPose>> {
+    let (first, last) = (pose[0].0, pose[pose.len() - 1].0);
+    if !start_s.is_finite() || start_s > last + WINDOW_TOLERANCE_S {
+        return None;
+    }
+    if start_s <= first {
+        return Some(pose.to_vec());
+    }
+    let start = (start_s, pose_at(pose, start_s.min(last))?);
+    Some(
+        std::iter::once(start)
+            .chain(
+                pose.iter()
+                    .copied()
+                    .filter(|(t, _)| *t > start_s + WINDOW_TOLERANCE_S),
+            )
+            .collect(),
+    )
+}
+
 /// The pose-only part of the summary; everything else empty.
 fn pose_summary(path: &Path, source: &str, pose: &[TimedPose]) -> BagSummary {
     let (first, last) = (pose[0], pose[pose.len() - 1]);
@@ -591,6 +659,7 @@ fn pose_summary(path: &Path, source: &str, pose: &[TimedPose]) -> BagSummary {
         .fold(0.0, f64::max);
     BagSummary {
         bag: path.display().to_string(),
+        start_s: 0.0,
         pose_source: source.to_string(),
         duration_s,
         distance_m: displacement.x,
@@ -644,18 +713,18 @@ fn joint_angle_series(
     series
 }
 
-/// Force statistics and the |F| series of one leg; `None` without messages.
+/// Force statistics from `start_s` on and the whole |F| series of one leg; `None` without
+/// messages in the window.
 fn leg_forces(
     topic: &str,
     leg: &str,
     wrenches: &[(u64, msgs::WrenchStamped)],
     time: &TimeBase,
     body: &BodyTrack,
+    start_s: f64,
 ) -> Option<(LegForceSummary, NamedSeries)> {
-    if wrenches.is_empty() {
-        return None;
-    }
     let mut points = Vec::with_capacity(wrenches.len());
+    let mut magnitudes = Vec::with_capacity(wrenches.len());
     let mut vertical = Vec::new();
     let clock = time.clock(wrenches.iter().map(|(_, m)| &m.header.stamp));
     for (log, m) in wrenches {
@@ -663,12 +732,18 @@ fn leg_forces(
         let f = &m.wrench.force;
         let force = Vector3::new(f.x, f.y, f.z);
         points.push((t, force.norm()));
+        if t < start_s - WINDOW_TOLERANCE_S {
+            continue;
+        }
+        magnitudes.push(force.norm());
         let frame = non_empty_or(tf::frame_name(&m.header.frame_id), leg);
         if let Some(link_pose) = body.link_pose(&frame, t) {
             vertical.push((link_pose.rotation * force).z);
         }
     }
-    let magnitudes: Vec<f64> = points.iter().map(|(_, f)| *f).collect();
+    if magnitudes.is_empty() {
+        return None;
+    }
     let summary = LegForceSummary {
         topic: topic.to_string(),
         samples: magnitudes.len(),
@@ -691,6 +766,7 @@ fn leg_forces(
 fn sinkage_summary(
     reader: &BagReader,
     body: &BodyTrack,
+    start_s: f64,
     summary: &mut BagSummary,
     notes: &mut Vec<String>,
 ) -> Result<(), AnalysisError> {
@@ -738,6 +814,7 @@ fn sinkage_summary(
         .unwrap_or(&body.pose)
         .iter()
         .map(|(t, _)| *t)
+        .filter(|t| *t >= start_s - WINDOW_TOLERANCE_S)
         .collect();
     let depths: Vec<f64> = times
         .iter()

@@ -5,7 +5,7 @@ use std::path::Path;
 
 use anyhow::Context;
 
-use super::{analyze_bag, BagSummary};
+use super::{analyze_bag_with, AnalysisOptions, BagSummary};
 use crate::analysis::plots::write_plots;
 
 /// Metres shown as millimetres in the human summary.
@@ -19,6 +19,9 @@ fn or_dash(value: Option<f64>, decimals: usize, unit: &str) -> String {
 impl fmt::Display for BagSummary {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(f, "bag: {}", self.bag)?;
+        if self.start_s > 0.0 {
+            writeln!(f, "analysed from t = {:.3} s on", self.start_s)?;
+        }
         writeln!(
             f,
             "body pose from {}: {:.3} s, distance {:.4} m along x, mean speed {}",
@@ -107,10 +110,16 @@ impl fmt::Display for BagSummary {
     }
 }
 
-/// `sandstep analyze`: analyses `bag`, writes plots into `plots_dir` if given, and prints the
-/// summary (one JSON object with `json`).
-pub fn run_analyze_command(bag: &Path, plots_dir: Option<&Path>, json: bool) -> anyhow::Result<()> {
-    let analysis = analyze_bag(bag).with_context(|| format!("analysing {}", bag.display()))?;
+/// `sandstep analyze`: analyses `bag` (from `opts.start_s` on), writes plots into `plots_dir`
+/// if given, and prints the summary (one JSON object with `json`).
+pub fn run_analyze_command(
+    bag: &Path,
+    opts: &AnalysisOptions,
+    plots_dir: Option<&Path>,
+    json: bool,
+) -> anyhow::Result<()> {
+    let analysis =
+        analyze_bag_with(bag, opts).with_context(|| format!("analysing {}", bag.display()))?;
     let mut summary = analysis.summary.clone();
     if let Some(dir) = plots_dir {
         let written = write_plots(&analysis, dir)

@@ -1,0 +1,176 @@
+//! A horizontal plate pressed into sand at constant speed through CPIC: the intrusion test of
+//! `tests/coupling.rs` and the measurement behind `sandstep calibrate-rft` (resistive force
+//! theory, `docs/physics.md`). The plate is a thin box whose mid-plane is a CPIC sheet, moved
+//! kinematically (one-way: the sand feels it, it records what it would feel).
+
+use rapier3d::glamx::Vec3;
+use rapier3d::prelude::{Pose, RigidBodyBuilder, RigidBodySet};
+use serde::Serialize;
+
+use super::{Coupling, CouplingMode, CpicSurface, SandCollider};
+use crate::mpm::{SimError, Solver};
+
+/// How the plate is pressed.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlatePress {
+    /// Centre of the plate's mid-plane at the start (m); its z is the sand surface, depth 0.
+    pub start_m: [f32; 3],
+    /// Half extents of the plate (m); the z one is its half thickness.
+    pub half_extents_m: [f32; 3],
+    /// Downward speed (m/s), > 0.
+    pub speed_m_s: f32,
+    /// Depth of the mid-plane below the start at the end (m).
+    pub final_depth_m: f32,
+    /// The force is averaged over windows of this much simulated time (s).
+    pub window_s: f64,
+    /// Coulomb friction coefficient sand-plate (-).
+    pub friction: f32,
+}
+
+/// The sand's mean upward force on the plate over one window.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct PlateSample {
+    /// Depth of the plate's mid-plane below the start at the end of the window (m).
+    pub depth_m: f64,
+    /// Upward force (N): the vertical impulse over the window divided by its length.
+    pub force_n: f64,
+}
+
+/// Presses the plate from `press.start_m` down to `press.final_depth_m` at constant speed,
+/// stepping `sand` with the CPIC coupling (the step also bounded by
+/// [`Coupling::max_dt_s`]), and returns one sample per window.
+pub fn press_plate(sand: &mut Solver, press: &PlatePress) -> Result<Vec<PlateSample>, SimError> {
+    let mut bodies = RigidBodySet::new();
+    let [x, y, z] = press.start_m;
+    let plate = bodies.insert(
+        RigidBodyBuilder::kinematic_velocity_based()
+            .translation(Vec3::new(x, y, z))
+            .linvel(Vec3::new(0.0, 0.0, -press.speed_m_s)),
+    );
+    let collider = SandCollider {
+        name: "plate".into(),
+        body: plate,
+        body_to_surface: Pose::IDENTITY,
+        surface: CpicSurface::thin_box(press.half_extents_m),
+        friction: press.friction,
+        mode: CouplingMode::OneWay,
+    };
+    let coupling = Coupling::new(vec![collider], &bodies).expect("one collider, in the set");
+    let dx = sand.grid().dx;
+    let end_s = sand.time_s + (press.final_depth_m / press.speed_m_s) as f64;
+    let mut samples = Vec::new();
+    let mut window_end = sand.time_s;
+    while window_end < end_s {
+        window_end += press.window_s;
+        let (mut impulse_n_s, mut elapsed_s) = (0.0f64, 0.0f64);
+        while sand.time_s < window_end {
+            let dt = sand.next_dt().min(coupling.max_dt_s(&bodies, dx));
+            let impulses = coupling.substep(sand, &mut bodies, dt)?;
+            impulse_n_s += impulses[0].linear_n_s.z;
+            elapsed_s += dt as f64;
+            let rb = &mut bodies[plate];
+            let moved = rb.translation() + rb.linvel() * dt;
+            rb.set_translation(moved, true);
+        }
+        let depth_m = z - bodies[plate].translation().z;
+        samples.push(PlateSample {
+            depth_m: depth_m as f64,
+            force_n: impulse_n_s / elapsed_s,
+        });
+    }
+    Ok(samples)
+}
+
+/// Mean force over each `cell_m` of depth from 0 to `final_depth_m`, at the cell's mid-depth.
+/// The CPIC force saws with the grid period as the plate passes node planes (the set of
+/// incompatible nodes changes at each plane; `docs/physics.md`), so fit these means, not the
+/// raw samples. Cells without samples are left out.
+pub fn depth_cell_means(
+    samples: &[PlateSample],
+    cell_m: f64,
+    final_depth_m: f64,
+) -> Vec<PlateSample> {
+    let cells = (final_depth_m / cell_m).round() as usize;
+    (0..cells)
+        .filter_map(|c| {
+            let (lo, hi) = (c as f64 * cell_m, (c + 1) as f64 * cell_m);
+            let inside: Vec<f64> = samples
+                .iter()
+                .filter(|s| s.depth_m >= lo && s.depth_m < hi)
+                .map(|s| s.force_n)
+                .collect();
+            (!inside.is_empty()).then(|| PlateSample {
+                depth_m: 0.5 * (lo + hi),
+                force_n: inside.iter().sum::<f64>() / inside.len() as f64,
+            })
+        })
+        .collect()
+}
+
+/// A least-squares line `y = slope x + intercept` and its coefficient of determination.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct LineFit {
+    pub slope: f64,
+    pub intercept: f64,
+    /// `1 - SS_res / SS_tot`, with `SS_tot` about the mean of y.
+    pub r_squared: f64,
+}
+
+/// Ordinary least squares through `(x, y)` points; with `through_origin` the intercept is held
+/// at 0 (`slope = sum x y / sum x^2`). Needs two points with different x (one nonzero x
+/// through the origin); NaN otherwise.
+pub fn fit_line(points: &[(f64, f64)], through_origin: bool) -> LineFit {
+    let n = points.len() as f64;
+    let (mx, my) = points
+        .iter()
+        .fold((0.0, 0.0), |(a, b), (x, y)| (a + x / n, b + y / n));
+    let (slope, intercept) = if through_origin {
+        let sxy: f64 = points.iter().map(|(x, y)| x * y).sum();
+        let sxx: f64 = points.iter().map(|(x, _)| x * x).sum();
+        (sxy / sxx, 0.0)
+    } else {
+        let sxy: f64 = points.iter().map(|(x, y)| (x - mx) * (y - my)).sum();
+        let sxx: f64 = points.iter().map(|(x, _)| (x - mx).powi(2)).sum();
+        let slope = sxy / sxx;
+        (slope, my - slope * mx)
+    };
+    let residual: f64 = points
+        .iter()
+        .map(|(x, y)| (y - slope * x - intercept).powi(2))
+        .sum();
+    let total: f64 = points.iter().map(|(_, y)| (y - my).powi(2)).sum();
+    LineFit {
+        slope,
+        intercept,
+        r_squared: 1.0 - residual / total,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fits_lines_with_and_without_intercept() {
+        let points = [(1.0, 3.0), (2.0, 5.0), (3.0, 7.0)];
+        let free = fit_line(&points, false);
+        assert!((free.slope - 2.0).abs() < 1e-12 && (free.intercept - 1.0).abs() < 1e-12);
+        assert!((free.r_squared - 1.0).abs() < 1e-12);
+        let origin = fit_line(&points, true);
+        // sum x y = 34, sum x^2 = 14.
+        assert!((origin.slope - 34.0 / 14.0).abs() < 1e-12 && origin.intercept == 0.0);
+        assert!(origin.r_squared < 1.0);
+    }
+
+    #[test]
+    fn averages_samples_per_cell_of_depth() {
+        let samples: Vec<PlateSample> = [(0.001, 1.0), (0.004, 3.0), (0.006, 10.0)]
+            .iter()
+            .map(|&(depth_m, force_n)| PlateSample { depth_m, force_n })
+            .collect();
+        let means = depth_cell_means(&samples, 0.005, 0.015);
+        assert_eq!(means.len(), 2, "the empty third cell is left out");
+        assert!((means[0].depth_m - 0.0025).abs() < 1e-12 && means[0].force_n == 2.0);
+        assert!((means[1].depth_m - 0.0075).abs() < 1e-12 && means[1].force_n == 10.0);
+    }
+}

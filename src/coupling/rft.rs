@@ -1,0 +1,810 @@
+//! Resistive force theory (RFT): the granular terrain as a local, rate-independent stress on
+//! every surface element of a body moving through it (Li, Zhang and Goldman, "A terradynamics
+//! of legged locomotion on granular media", Science 339:1408, 2013; `docs/physics.md`,
+//! "Resistive force theory").
+//!
+//! **2D law.** An element of area `dA` at depth `|z|` below the free surface, moving in a
+//! vertical plane, feels `dF_x = alpha_x(beta, gamma) |z| dA` and `dF_z = alpha_z(beta, gamma)
+//! |z| dA` (nothing above the surface), with the generic form of Li et al. (their Eq. 1 and the
+//! generic coefficients of their supplement), per unit medium scale `zeta`:
+//!
+//! - `alpha_z / zeta = A00 + A10 cos 2b + B11 sin(2b + g) + B01 sin g + Bm11 sin(-2b + g)`,
+//! - `alpha_x / zeta = C11 cos(2b + g) + C01 cos g + Cm11 sin(-2b + g) + D10 sin 2b`,
+//!
+//! for `b = beta`, `g = gamma` in `[-pi/2, pi/2]`. The A and B coefficients sum to 1, so `zeta =
+//! alpha_z(0, pi/2)`: the stress per unit depth under a horizontal plate pressed straight down.
+//! Li et al. give alpha and zeta in N/cm^3; here they are SI, N/m^3 (1 N/cm^3 = 1e6 N/m^3).
+//!
+//! **Signs** (checked against the physics, and the frame of Agarwal, Goldman and Kamrin, PNAS
+//! 120:e2214017120, 2023): in the vertical plane of the element's velocity, let `r` be the
+//! horizontal unit vector along the velocity ("forward") and `z` point up.
+//! - `gamma` is the angle of the velocity below the horizontal: `v = |v| (cos g r - sin g z)`;
+//!   `+pi/2` is straight down, `-pi/2` straight up.
+//! - `beta` is the angle of the element's plane above the horizontal, positive when the plate
+//!   rises towards the front: its lower face's normal is `(sin b) r - (cos b) z`, looking
+//!   forward and down (a plate pushing sand down ahead of it: much lift and drag; at `gamma =
+//!   0` `alpha_z(45 deg) = 0.363 zeta`, `alpha_z(-45 deg) = 0.049 zeta`).
+//! - `alpha_z > 0` pushes up; `alpha_x > 0` pushes **backward**, against the horizontal
+//!   motion (`alpha_x(pi/2, 0) = 0.377 zeta`: a vertical plate dragged sideways is held back).
+//!   The force is `(alpha_z z - alpha_x r) |z| dA`.
+//!
+//! **Symmetries** ([`alpha`] extends the law to all angles with them): a plate is a line, so
+//! `alpha(beta + pi, gamma) = alpha(beta, gamma)` (the formulas are pi-periodic in beta); the
+//! mirror image of a motion (x -> -x) has `beta -> -beta`, `gamma -> pi - gamma` and mirrored
+//! forces: `alpha_z(-beta, pi - gamma) = alpha_z(beta, gamma)`, `alpha_x(-beta, pi - gamma) =
+//! -alpha_x(beta, gamma)`; and gamma is an angle (2 pi periodic). Velocities with a backward
+//! component (`|gamma| > pi/2`) are mirrored into the fitted range. For vertical motion
+//! (`|gamma| = pi/2`) the mirror maps the motion onto itself, so alpha_x must be odd in beta;
+//! the generic fit has an even residual `Cm11 cos 2b` there (0.7 % of zeta), which [`alpha`]
+//! drops (it uses the odd part).
+//!
+//! **3D: the vertical plane of the velocity.** Each element is reduced to Li's 2D problem in
+//! the vertical plane containing its velocity (the local frame `r, z` of Agarwal et al.'s 3D
+//! RFT, in which their model reduces to Li's 2D RFT when the element's normal lies in that
+//! plane): gamma from the velocity, beta from the normal projected into the plane, and the area
+//! weighted by the length of that projection (`sqrt(1 - (n.t)^2)` with `t = z x r`), so an
+//! element sliding edge-on feels nothing and the force is continuous as the normal turns out of
+//! the plane. The force has no component across the plane. For exactly vertical motion the
+//! plane is the one containing the normal. Why this one: it is exact for motion in vertical
+//! planes, which is how Li et al. applied RFT to their robot's legs and how this robot's legs
+//! turn (about the hip axis y); gamma is always defined; and it needs no further fitted
+//! functions. The general alternative, Treers, Cao and Stuart (IEEE RA-L 6:1394, 2021), works
+//! in the plane of the normal and needs two empirical scaling functions and an out-of-plane
+//! coefficient fitted to their medium, which one plate test cannot calibrate.
+//!
+//! **Elements** ([`body_elements`]): the colliders of a body as the CPIC coupling sees them
+//! ([`super::body_surfaces`] with the element size as the thinness threshold). A solid box
+//! gives its six faces, split into elements no longer than `element_size_m`, one-sided with
+//! outward normals; only leading faces (`n . v > 0`) resist (Li et al.'s leading surface). A
+//! chain of boxes thinner than one element (a leg) is a thin plate: the triangles of its
+//! mid-surface sheet (`box_chain_sheet`), split likewise, two-sided: each element acts with
+//! the normal that faces its motion, which is Li et al.'s plate element (their alpha covers a
+//! plate, both faces, at every angle), at the depth of the mid-surface like the CPIC sheet.
+//!
+//! **Regularisation.** The RFT stress depends on the direction of motion, not on its speed, so
+//! an element that nearly stops would flip its force every step. Each element's force is
+//! scaled by `min(1, |v| / v_ref)` (`reference_speed_m_s`): below `v_ref` the terrain acts like
+//! a stiff viscous damper, above it the stress is Li's. A body at rest on RFT ground therefore
+//! creeps down at a speed below `v_ref` times its weight over the full RFT resistance.
+
+use std::f64::consts::{FRAC_PI_2, PI, TAU};
+
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Vector3};
+use rapier3d::glamx::Vec3;
+use rapier3d::prelude::{
+    ColliderSet, MultibodyIndex, MultibodyJointSet, Pose, RigidBody, RigidBodyHandle, RigidBodySet,
+};
+
+use super::{body_surfaces, CpicSurface};
+
+/// Generic coefficients of the RFT stress functions per unit zeta (Li, Zhang and Goldman
+/// 2013, supplement: the fit shared by their granular media up to the scale factor zeta).
+pub mod generic {
+    pub const A00: f64 = 0.206;
+    pub const A10: f64 = 0.169;
+    pub const B11: f64 = 0.212;
+    pub const B01: f64 = 0.358;
+    pub const BM11: f64 = 0.055;
+    pub const C11: f64 = -0.124;
+    pub const C01: f64 = 0.253;
+    pub const CM11: f64 = 0.007;
+    pub const D10: f64 = 0.088;
+}
+
+/// A velocity whose horizontal part is below this fraction of its magnitude counts as
+/// vertical (its vertical plane is then taken through the element's normal).
+const VERTICAL_MOTION_FRACTION: f64 = 1e-9;
+/// Angles gamma within this of +-pi/2 (rad) are vertical motion, for the mirror-symmetric
+/// treatment in [`alpha`] (round-off of `pi - gamma` and the like).
+const VERTICAL_GAMMA_TOLERANCE_RAD: f64 = 1e-12;
+/// A triangle is split while its longest edge exceeds the element size by more than this
+/// fraction (round-off of exactly fitting sizes).
+const ELEMENT_SIZE_SLACK: f64 = 1e-6;
+
+/// The generic law inside its fitted range `|gamma| <= pi/2`, from `cos 2 beta`, `sin 2 beta`,
+/// `cos gamma` and `sin gamma` (the angle-sum identities of the formulas; any beta: the law is
+/// pi-periodic in it).
+fn alpha_fitted_cs(cos_2b: f64, sin_2b: f64, cos_g: f64, sin_g: f64) -> (f64, f64) {
+    use generic::*;
+    // sin(2b + g), cos(2b + g), sin(-2b + g).
+    let sin_sum = sin_2b * cos_g + cos_2b * sin_g;
+    let cos_sum = cos_2b * cos_g - sin_2b * sin_g;
+    let sin_diff = sin_g * cos_2b - cos_g * sin_2b;
+    let alpha_z = A00 + A10 * cos_2b + B11 * sin_sum + B01 * sin_g + BM11 * sin_diff;
+    let alpha_x = C11 * cos_sum + C01 * cos_g + CM11 * sin_diff + D10 * sin_2b;
+    (alpha_x, alpha_z)
+}
+
+/// [`alpha_fitted_cs`] from the angles.
+fn alpha_fitted(beta: f64, gamma: f64) -> (f64, f64) {
+    let (sin_2b, cos_2b) = (2.0 * beta).sin_cos();
+    let (sin_g, cos_g) = gamma.sin_cos();
+    alpha_fitted_cs(cos_2b, sin_2b, cos_g, sin_g)
+}
+
+/// [`alpha_fitted_cs`] for vertical motion (`cos gamma = 0`, `sin gamma = +-1`) with alpha_x's
+/// even residual `Cm11 cos 2 beta` dropped: the mirror image of vertical motion is itself, so
+/// alpha_x must be odd in beta.
+fn alpha_vertical_cs(cos_2b: f64, sin_2b: f64, sin_g: f64) -> (f64, f64) {
+    let (x_here, z) = alpha_fitted_cs(cos_2b, sin_2b, 0.0, sin_g);
+    let (x_mirror, _) = alpha_fitted_cs(cos_2b, -sin_2b, 0.0, sin_g);
+    (0.5 * (x_here - x_mirror), z)
+}
+
+/// The RFT stresses per unit depth and unit zeta, `(alpha_x, alpha_z) / zeta`, for attack angle
+/// `beta_rad` and intrusion angle `gamma_rad`, any values (module docs: signs, symmetries):
+/// the generic fit for `|gamma| < pi/2`, its mirror image for `|gamma| > pi/2`, and for
+/// vertical motion the fit with alpha_x's even residual removed. Multiply by zeta (N/m^3),
+/// depth (m) and area (m^2) for a force (N).
+pub fn alpha(beta_rad: f64, gamma_rad: f64) -> (f64, f64) {
+    let gamma = if gamma_rad > PI || gamma_rad <= -PI {
+        gamma_rad - TAU * ((gamma_rad + PI) / TAU).floor()
+    } else {
+        gamma_rad
+    };
+    // The range of floor() above is [-pi, pi): move -pi to pi.
+    let gamma = if gamma <= -PI { gamma + TAU } else { gamma };
+    if (gamma.abs() - FRAC_PI_2).abs() <= VERTICAL_GAMMA_TOLERANCE_RAD {
+        let (sin_2b, cos_2b) = (2.0 * beta_rad).sin_cos();
+        alpha_vertical_cs(cos_2b, sin_2b, 1.0f64.copysign(gamma))
+    } else if gamma.abs() < FRAC_PI_2 {
+        alpha_fitted(beta_rad, gamma)
+    } else {
+        let (x, z) = alpha_fitted(-beta_rad, PI.copysign(gamma) - gamma);
+        (-x, z)
+    }
+}
+
+/// The RFT medium and how bodies are discretised.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RftParams {
+    /// Medium scale zeta: vertical stress per unit depth under a horizontal plate pressed
+    /// straight down (N/m^3), > 0.
+    pub zeta_n_m3: f64,
+    /// Height of the flat free surface (m): depth is measured from it.
+    pub surface_height_m: f64,
+    /// Longest edge of a surface element (m), > 0; also the thickness below which a box is a
+    /// thin plate.
+    pub element_size_m: f64,
+    /// Regularisation speed v_ref (m/s), > 0: an element slower than this feels the fraction
+    /// `|v| / v_ref` of its RFT force.
+    pub reference_speed_m_s: f64,
+}
+
+/// One surface element of a body, in the body's frame (the rapier body's position, not its
+/// centre of mass).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfaceElement {
+    /// Centre (m), body frame.
+    pub centre_m: Vec3,
+    /// Unit normal, body frame: outward for a solid's face; either side for a thin plate.
+    pub normal: Vec3,
+    /// Area (m^2).
+    pub area_m2: f32,
+    /// A thin plate's element: acts with whichever normal faces its motion. Otherwise only
+    /// when leading (`n . v > 0`).
+    pub two_sided: bool,
+}
+
+/// The terrain's force on one element (N, world axes) at depth `depth_m` (m, > 0 below the
+/// surface) with unit normal `normal` and velocity `velocity_m_s` (m/s), both world axes, in
+/// the vertical plane of its velocity (module docs), regularised: scaled by `min(1, |v| /
+/// v_ref)`. Zero above the surface, at rest, and for a one-sided element that is not leading.
+pub fn element_force_n(
+    params: &RftParams,
+    depth_m: f64,
+    normal: Vector3<f64>,
+    two_sided: bool,
+    area_m2: f64,
+    velocity_m_s: Vector3<f64>,
+) -> Vector3<f64> {
+    let speed = velocity_m_s.norm();
+    let full = element_stress_n_m2(params, depth_m, normal, two_sided, velocity_m_s);
+    full * area_m2 * (speed / params.reference_speed_m_s).min(1.0)
+}
+
+/// Li et al.'s stress on an element (N/m^2, world axes): [`element_force_n`] per unit area,
+/// not regularised (the same at any nonzero speed).
+fn element_stress_n_m2(
+    params: &RftParams,
+    depth_m: f64,
+    normal: Vector3<f64>,
+    two_sided: bool,
+    velocity_m_s: Vector3<f64>,
+) -> Vector3<f64> {
+    let speed = velocity_m_s.norm();
+    if depth_m <= 0.0 || speed == 0.0 || !speed.is_finite() {
+        return Vector3::zeros();
+    }
+    let facing = normal.dot(&velocity_m_s);
+    let normal = if facing > 0.0 {
+        normal
+    } else if two_sided {
+        if facing < 0.0 {
+            -normal
+        } else {
+            normal
+        }
+    } else {
+        return Vector3::zeros();
+    };
+    let horizontal = Vector3::new(velocity_m_s.x, velocity_m_s.y, 0.0);
+    let horizontal_speed = horizontal.norm();
+    let vertical = horizontal_speed <= VERTICAL_MOTION_FRACTION * speed;
+    let forward = if !vertical {
+        horizontal / horizontal_speed
+    } else {
+        // Straight up or down: every vertical plane holds the velocity; take the normal's.
+        let normal_horizontal = Vector3::new(normal.x, normal.y, 0.0);
+        let length = normal_horizontal.norm();
+        if length > 0.0 {
+            normal_horizontal / length
+        } else {
+            Vector3::x()
+        }
+    };
+    let (normal_forward, normal_up) = (normal.dot(&forward), normal.z);
+    let in_plane_sq = normal_forward * normal_forward + normal_up * normal_up;
+    if in_plane_sq == 0.0 {
+        return Vector3::zeros();
+    }
+    // The plate's line in the (forward, up) plane makes angle beta with the horizontal; its
+    // normal is +-(sin beta, -cos beta), and the law needs only the pi-periodic cos 2 beta and
+    // sin 2 beta, which do not depend on that sign. Gamma: v = |v| (cos g r - sin g z).
+    let cos_2b = (normal_up * normal_up - normal_forward * normal_forward) / in_plane_sq;
+    let sin_2b = -2.0 * normal_forward * normal_up / in_plane_sq;
+    let sin_g = -velocity_m_s.z / speed;
+    let (alpha_x, alpha_z) = if vertical {
+        alpha_vertical_cs(cos_2b, sin_2b, 1.0f64.copysign(sin_g))
+    } else {
+        alpha_fitted_cs(cos_2b, sin_2b, horizontal_speed / speed, sin_g)
+    };
+    let scale = params.zeta_n_m3 * depth_m * in_plane_sq.sqrt();
+    (Vector3::z() * alpha_z - forward * alpha_x) * scale
+}
+
+/// Surface elements of a rapier body's colliders (module docs): solid boxes give their faces,
+/// chains of boxes thinner than `element_size_m` one two-sided sheet. Errors name the problem
+/// (a collider that is not a box, thin boxes that do not form a chain).
+pub fn body_elements(
+    body: RigidBodyHandle,
+    bodies: &RigidBodySet,
+    colliders: &ColliderSet,
+    element_size_m: f64,
+) -> Result<Vec<SurfaceElement>, String> {
+    let mut elements = Vec::new();
+    for (pose, surface) in body_surfaces(body, bodies, colliders, element_size_m as f32)? {
+        match surface {
+            CpicSurface::Solid(shape) => {
+                let cuboid = shape.as_cuboid().ok_or_else(|| {
+                    format!(
+                        "RFT needs box collision shapes; found a {:?}",
+                        shape.shape_type()
+                    )
+                })?;
+                box_faces(&pose, cuboid.half_extents, element_size_m, &mut elements);
+            }
+            CpicSurface::Sheet(sheet) => {
+                let mesh = sheet.mesh();
+                let vertices = mesh.vertices();
+                for tri in mesh.indices() {
+                    let [a, b, c] = tri.map(|i| pose.transform_point(vertices[i as usize]));
+                    split_triangle([a, b, c], element_size_m, &mut elements);
+                }
+            }
+        }
+    }
+    Ok(elements)
+}
+
+/// The six faces of a box with half extents `half` at `pose`, each split into a grid of
+/// elements no longer than `size` (m) along either side; outward normals, one-sided.
+fn box_faces(pose: &Pose, half: Vec3, size: f64, out: &mut Vec<SurfaceElement>) {
+    let h = half.to_array();
+    for axis in 0..3 {
+        let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+        let cells = |a: usize| ((2.0 * h[a] as f64 / size).ceil() as usize).max(1);
+        let (nu, nv) = (cells(u), cells(v));
+        let (du, dv) = (2.0 * h[u] / nu as f32, 2.0 * h[v] / nv as f32);
+        for sign in [-1.0f32, 1.0] {
+            let normal = Vec3::AXES[axis] * sign;
+            for i in 0..nu {
+                for j in 0..nv {
+                    let mut local = [0.0f32; 3];
+                    local[axis] = sign * h[axis];
+                    local[u] = -h[u] + (i as f32 + 0.5) * du;
+                    local[v] = -h[v] + (j as f32 + 0.5) * dv;
+                    out.push(SurfaceElement {
+                        centre_m: pose.transform_point(Vec3::from(local)),
+                        normal: pose.rotation * normal,
+                        area_m2: du * dv,
+                        two_sided: false,
+                    });
+                }
+            }
+        }
+    }
+}
+
+/// A thin plate's triangle as two-sided elements: split into four at its edge midpoints until
+/// no edge is longer than `size` (m); each piece acts at its centroid (exact for a depth
+/// linear over the piece).
+fn split_triangle(corners: [Vec3; 3], size: f64, out: &mut Vec<SurfaceElement>) {
+    let [a, b, c] = corners;
+    let longest = (b - a).length().max((c - b).length()).max((a - c).length()) as f64;
+    if longest > size * (1.0 + ELEMENT_SIZE_SLACK) {
+        let (ab, bc, ca) = ((a + b) * 0.5, (b + c) * 0.5, (c + a) * 0.5);
+        for piece in [[a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]] {
+            split_triangle(piece, size, out);
+        }
+        return;
+    }
+    let doubled = (b - a).cross(c - a);
+    out.push(SurfaceElement {
+        centre_m: (a + b + c) / 3.0,
+        normal: doubled.normalize(),
+        area_m2: 0.5 * doubled.length(),
+        two_sided: true,
+    });
+}
+
+/// A body the terrain acts on.
+#[derive(Clone, Debug)]
+pub struct RftBody {
+    /// For messages.
+    pub name: String,
+    pub body: RigidBodyHandle,
+    pub elements: Vec<SurfaceElement>,
+    /// Largest distance of an element centre from the body's origin (m): a body whose origin is
+    /// higher than this above the surface is skipped.
+    pub reach_m: f32,
+}
+
+/// The terrain's total force on a body and its torque about the body's centre of mass, world
+/// axes.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BodyWrench {
+    /// Force (N).
+    pub force_n: Vector3<f64>,
+    /// Torque about the centre of mass (N m).
+    pub torque_n_m: Vector3<f64>,
+}
+
+/// Adds an isotropic damper of coefficient `c` (N s/m) at arm `r` (m) from a body's centre of
+/// mass to `damper`, the 6x6 matrix C with `wrench = -C twist` (force and torque about the
+/// centre of mass; linear velocity of the centre of mass and angular velocity, world axes):
+/// the point moves at `v + w x r`, so `C += c [[1, -[r]x], [[r]x, -[r]x [r]x]]`.
+fn add_point_damper(damper: &mut Matrix6<f64>, c: f64, r: Vector3<f64>) {
+    let cross = r.cross_matrix();
+    let mut block = Matrix6::zeros();
+    block
+        .fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&Matrix3::identity());
+    block.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-cross));
+    block.fixed_view_mut::<3, 3>(3, 0).copy_from(&cross);
+    block
+        .fixed_view_mut::<3, 3>(3, 3)
+        .copy_from(&(-(cross * cross)));
+    *damper += block * c;
+}
+
+/// Errors building an RFT terrain.
+#[derive(thiserror::Error, Debug, Clone, PartialEq)]
+pub enum RftError {
+    #[error("{name}: its body is not in the rapier world")]
+    MissingBody { name: String },
+    #[error("{name}: cannot make its RFT surface elements: {message}")]
+    Elements { name: String, message: String },
+}
+
+/// The dampers of one multibody's links in the terrain: (link id, 6x6 damper about the link's
+/// centre of mass).
+type LinkDampers = Vec<(usize, Matrix6<f64>)>;
+
+/// A flat RFT terrain and the bodies it acts on.
+///
+/// [`Self::apply`] sets each body's RFT wrench `W(u_n)` at the start of a step as its user
+/// force, and makes the step linearly implicit in the terrain's damping. The RFT force falls to
+/// zero with the speed below v_ref and flips with the direction of motion: explicitly, a 2 g
+/// leg held in the sand by its motor chatters (its speed jumps by `|F| dt r^2 / I` each step,
+/// about 1.5 rad/s at 0.5 ms), and the chatter walks the robot. Each element acts like a
+/// damper of coefficient `c = |F_full| / max(|v|, v_ref)` (the exact slope of the regularised
+/// force below v_ref, the secant above); summed per link (`C_l`, 6x6, about its centre of mass)
+/// and mapped into the multibody's generalized coordinates with rapier's link Jacobians
+/// (`C_q = sum J_l^T C_l J_l`), its diagonal `D` is added for the step as armature `dt D` to
+/// rapier's mass matrix. Rapier then solves `(M + dt D) (u_{n+1} - u_n) = dt (W(u_n) + other
+/// forces)`: the terrain force is `W(u_n) - D (u_{n+1} - u_n)`, the wrench linearised at the
+/// end of the step with the diagonal of its slope (exact in steady motion; the off-diagonal
+/// couplings stay explicit). Measured: a standing robot settles without chatter, and walking
+/// speeds agree within 5 % between 1 ms and 0.25 ms steps (`docs/physics.md`). Bodies that are
+/// not multibody links get the explicit wrench only. (A full-matrix bound such as Gershgorin's
+/// row sums over-damps the body's coupled degrees of freedom and made the robot tumble on
+/// stiff ground; velocity motors on joints to a fixed body left an unconverged solver velocity
+/// that the robot rode on.)
+#[derive(Clone, Debug)]
+pub struct RftTerrain {
+    params: RftParams,
+    bodies: Vec<RftBody>,
+    /// Each multibody the terrain acts on, with its armature before the terrain's (kg or
+    /// kg m^2 per degree of freedom), recorded by the first [`Self::apply`].
+    armatures: Vec<(MultibodyIndex, DVector<f32>)>,
+}
+
+fn to_f64(v: Vec3) -> Vector3<f64> {
+    Vector3::new(v.x as f64, v.y as f64, v.z as f64)
+}
+
+fn to_vec3(v: Vector3<f64>) -> Vec3 {
+    Vec3::new(v.x as f32, v.y as f32, v.z as f32)
+}
+
+impl RftTerrain {
+    /// The terrain acting on `parts` (name, body), each body's colliders turned into surface
+    /// elements ([`body_elements`]).
+    pub fn new(
+        params: RftParams,
+        parts: impl IntoIterator<Item = (String, RigidBodyHandle)>,
+        bodies: &RigidBodySet,
+        colliders: &ColliderSet,
+    ) -> Result<Self, RftError> {
+        let mut out = Vec::new();
+        for (name, body) in parts {
+            if bodies.get(body).is_none() {
+                return Err(RftError::MissingBody { name });
+            }
+            let elements = body_elements(body, bodies, colliders, params.element_size_m).map_err(
+                |message| RftError::Elements {
+                    name: name.clone(),
+                    message,
+                },
+            )?;
+            let reach_m = elements
+                .iter()
+                .map(|e| e.centre_m.length())
+                .fold(0.0, f32::max);
+            out.push(RftBody {
+                name,
+                body,
+                elements,
+                reach_m,
+            });
+        }
+        Ok(RftTerrain {
+            params,
+            bodies: out,
+            armatures: Vec::new(),
+        })
+    }
+
+    pub fn params(&self) -> &RftParams {
+        &self.params
+    }
+
+    /// The bodies, in the order of the wrenches.
+    pub fn bodies(&self) -> &[RftBody] {
+        &self.bodies
+    }
+
+    /// The terrain's regularised wrench on each body at the bodies' present poses and
+    /// velocities (element velocity = linvel + angvel x r about the centre of mass), in
+    /// [`Self::bodies`] order.
+    pub fn wrenches(&self, bodies: &RigidBodySet) -> Vec<BodyWrench> {
+        self.bodies
+            .iter()
+            .map(|b| self.body_wrench(&bodies[b.body], b).0)
+            .collect()
+    }
+
+    /// The wrench on `body` (rigid body `rb`) and its damper (type docs, [`add_point_damper`]).
+    fn body_wrench(&self, rb: &RigidBody, body: &RftBody) -> (BodyWrench, Matrix6<f64>) {
+        let mut wrench = BodyWrench::default();
+        let mut damper = Matrix6::zeros();
+        let pose = rb.position();
+        if (pose.translation.z - body.reach_m) as f64 > self.params.surface_height_m {
+            return (wrench, damper);
+        }
+        let com = to_f64(rb.center_of_mass());
+        let (linvel, angvel) = (to_f64(rb.linvel()), to_f64(rb.angvel()));
+        let v_ref = self.params.reference_speed_m_s;
+        for e in &body.elements {
+            let centre = to_f64(pose.transform_point(e.centre_m));
+            let depth_m = self.params.surface_height_m - centre.z;
+            if depth_m <= 0.0 {
+                continue;
+            }
+            let arm = centre - com;
+            let velocity = linvel + angvel.cross(&arm);
+            let full = element_stress_n_m2(
+                &self.params,
+                depth_m,
+                to_f64(pose.rotation * e.normal),
+                e.two_sided,
+                velocity,
+            ) * e.area_m2 as f64;
+            let speed = velocity.norm();
+            let force = full * (speed / v_ref).min(1.0);
+            let magnitude = full.norm();
+            if magnitude > 0.0 {
+                add_point_damper(&mut damper, magnitude / speed.max(v_ref), arm);
+            }
+            wrench.force_n += force;
+            wrench.torque_n_m += arm.cross(&force);
+        }
+        (wrench, damper)
+    }
+
+    /// Sets each body's RFT wrench at its present state as its user force and torque (the
+    /// previous ones are replaced; multibody links take loads this way), and the terrain's
+    /// damping as armature `dt_s D` on the multibodies' degrees of freedom, for the next rapier
+    /// step, which must be `dt_s` seconds long (type docs). Returns the wrenches.
+    pub fn apply(
+        &mut self,
+        bodies: &mut RigidBodySet,
+        multibodies: &mut MultibodyJointSet,
+        dt_s: f64,
+    ) -> Vec<BodyWrench> {
+        let mut wrenches = Vec::with_capacity(self.bodies.len());
+        // Per multibody: (link id, damper) of its links in the terrain.
+        let mut dampers: Vec<(MultibodyIndex, LinkDampers)> = Vec::new();
+        for b in &self.bodies {
+            let (wrench, damper) = self.body_wrench(&bodies[b.body], b);
+            let rb = &mut bodies[b.body];
+            rb.reset_forces(false);
+            rb.reset_torques(false);
+            rb.add_force(to_vec3(wrench.force_n), true);
+            rb.add_torque(to_vec3(wrench.torque_n_m), true);
+            wrenches.push(wrench);
+            if let Some(link) = multibodies.rigid_body_link(b.body) {
+                match dampers.iter_mut().find(|(m, _)| *m == link.multibody) {
+                    Some((_, links)) => links.push((link.id, damper)),
+                    None => dampers.push((link.multibody, vec![(link.id, damper)])),
+                }
+            }
+        }
+        for (index, links) in dampers {
+            let Some(mb) = multibodies.get_multibody_mut(index) else {
+                continue;
+            };
+            let baseline = match self.armatures.iter().find(|(m, _)| *m == index) {
+                Some((_, a)) => a.clone(),
+                None => {
+                    self.armatures.push((index, mb.armature().clone()));
+                    mb.armature().clone()
+                }
+            };
+            let ndofs = mb.ndofs();
+            let mut generalized = DMatrix::<f64>::zeros(ndofs, ndofs);
+            for (link, damper) in &links {
+                let jacobian = mb.body_jacobian(*link).clone().cast::<f64>();
+                generalized += jacobian.transpose() * damper * &jacobian;
+            }
+            let armature = mb.armature_mut();
+            for k in 0..ndofs.min(armature.len()) {
+                armature[k] = baseline[k] + (dt_s * generalized[(k, k)].max(0.0)) as f32;
+            }
+        }
+        wrenches
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rapier3d::prelude::{ColliderBuilder, RigidBodyBuilder};
+
+    const ZETA: f64 = 4.0e5;
+
+    fn params() -> RftParams {
+        RftParams {
+            zeta_n_m3: ZETA,
+            surface_height_m: 0.0,
+            element_size_m: 0.004,
+            reference_speed_m_s: 0.01,
+        }
+    }
+
+    /// A kinematic body holding one box collider (half extents, m), at `centre` moving at
+    /// `velocity`, and the terrain acting on it.
+    fn plate(half: [f32; 3], centre: [f32; 3], velocity: [f32; 3]) -> (RigidBodySet, RftTerrain) {
+        let mut bodies = RigidBodySet::new();
+        let mut colliders = ColliderSet::new();
+        let body = bodies.insert(
+            RigidBodyBuilder::kinematic_velocity_based()
+                .translation(Vec3::from(centre))
+                .linvel(Vec3::from(velocity)),
+        );
+        colliders.insert_with_parent(
+            ColliderBuilder::cuboid(half[0], half[1], half[2]),
+            body,
+            &mut bodies,
+        );
+        let terrain =
+            RftTerrain::new(params(), [("plate".to_string(), body)], &bodies, &colliders).unwrap();
+        (bodies, terrain)
+    }
+
+    #[test]
+    fn zeta_is_the_vertical_stress_of_a_horizontal_plate_pressed_down() {
+        let (x, z) = alpha(0.0, FRAC_PI_2);
+        assert!((z - 1.0).abs() < 1e-12, "alpha_z(0, 90 deg) = {z}");
+        assert_eq!(
+            x, 0.0,
+            "no sideways force on a horizontal plate moving straight down"
+        );
+    }
+
+    #[test]
+    fn alpha_has_the_documented_symmetries() {
+        let steps = 48;
+        for i in 0..=steps {
+            for j in 0..=steps {
+                let beta = -PI + TAU * i as f64 / steps as f64;
+                let gamma = -PI + TAU * j as f64 / steps as f64 + 1e-3 * (j % 3) as f64;
+                let (x, z) = alpha(beta, gamma);
+                let close = |a: f64, b: f64| (a - b).abs() < 1e-12;
+                // A plate is a line.
+                let (xp, zp) = alpha(beta + PI, gamma);
+                assert!(
+                    close(x, xp) && close(z, zp),
+                    "pi-periodic in beta at {beta}, {gamma}"
+                );
+                // Gamma is an angle.
+                let (xg, zg) = alpha(beta, gamma + TAU);
+                assert!(close(x, xg) && close(z, zg), "2 pi-periodic in gamma");
+                // The mirror image of a motion has mirrored forces.
+                let (xm, zm) = alpha(-beta, PI - gamma);
+                assert!(
+                    close(x, -xm) && close(z, zm),
+                    "mirror at beta {beta}, gamma {gamma}: ({x}, {z}) vs ({xm}, {zm})"
+                );
+            }
+        }
+        // Vertical motion: alpha_x odd and alpha_z even in beta.
+        for beta in [0.1, 0.5, 1.0, 1.5] {
+            for gamma in [FRAC_PI_2, -FRAC_PI_2] {
+                let (x, z) = alpha(beta, gamma);
+                let (xm, zm) = alpha(-beta, gamma);
+                assert!((x + xm).abs() < 1e-12 && (z - zm).abs() < 1e-12);
+            }
+        }
+        // Inside the fitted range alpha is the published formula.
+        let (x, z) = alpha(0.3, 0.2);
+        let (fx, fz) = alpha_fitted(0.3, 0.2);
+        assert!(x == fx && z == fz);
+    }
+
+    #[test]
+    fn signs_follow_the_physics() {
+        // A horizontal plate pulled straight up is held down, more weakly than pushed down.
+        let (_, up) = alpha(0.0, -FRAC_PI_2);
+        assert!(up < 0.0 && up.abs() < 1.0, "alpha_z(0, -90 deg) = {up}");
+        // Dragged horizontally: drag (alpha_x > 0 opposes the motion) and lift.
+        let (drag, lift) = alpha(0.0, 0.0);
+        assert!(drag > 0.0 && lift > 0.0);
+        // A plate rising towards the front pushes sand down ahead of it: more lift and drag
+        // than the one falling towards the front.
+        let (drag_up, lift_up) = alpha(FRAC_PI_2 / 2.0, 0.0);
+        let (drag_down, lift_down) = alpha(-FRAC_PI_2 / 2.0, 0.0);
+        assert!(lift_up > lift_down && drag_up > drag_down);
+    }
+
+    #[test]
+    fn horizontal_plate_pressed_straight_down_feels_zeta_depth_area() {
+        // 2 cm x 3 cm, 1 mm thick (a thin plate: its mid-plane, two-sided), 15 mm deep.
+        let (half, depth) = ([0.01, 0.015, 0.0005], 0.015);
+        let (bodies, terrain) = plate(half, [0.1, 0.0, -depth], [0.0, 0.0, -0.1]);
+        assert!(terrain.bodies()[0].elements.iter().all(|e| e.two_sided));
+        let w = terrain.wrenches(&bodies)[0];
+        let area = 4.0 * (half[0] * half[1]) as f64;
+        let expected = ZETA * depth as f64 * area;
+        assert!(
+            (w.force_n.z - expected).abs() < 1e-6 * expected,
+            "{} N vs {expected} N",
+            w.force_n.z
+        );
+        assert!(w.force_n.x.abs() < 1e-9 * expected && w.force_n.y.abs() < 1e-9 * expected);
+        assert!(w.torque_n_m.norm() < 1e-5 * expected * 0.01);
+        // A solid box (2 cm thick): its bottom face leads, at its own depth; the sides do not.
+        let (half, depth) = ([0.01, 0.015, 0.01], 0.03);
+        let (bodies, terrain) = plate(half, [0.0, 0.0, -depth], [0.0, 0.0, -0.1]);
+        let w = terrain.wrenches(&bodies)[0];
+        let expected = ZETA * (depth + half[2]) as f64 * 4.0 * (half[0] * half[1]) as f64;
+        assert!((w.force_n.z - expected).abs() < 1e-6 * expected);
+    }
+
+    #[test]
+    fn element_above_the_surface_feels_nothing() {
+        let (bodies, terrain) = plate([0.01, 0.01, 0.0005], [0.0, 0.0, 0.001], [0.0, 0.0, -0.1]);
+        assert_eq!(terrain.wrenches(&bodies)[0], BodyWrench::default());
+        let up = element_force_n(
+            &params(),
+            -0.01,
+            Vector3::z(),
+            true,
+            1e-4,
+            Vector3::new(0.0, 0.0, -1.0),
+        );
+        assert_eq!(up, Vector3::zeros());
+    }
+
+    #[test]
+    fn plate_moving_horizontally_is_held_back() {
+        for velocity in [[0.2, 0.0, 0.0], [-0.1, 0.1, 0.0]] {
+            // A vertical plate, face on to x, and a horizontal one, both 1 cm deep.
+            for half in [[0.0005, 0.01, 0.01], [0.01, 0.01, 0.0005]] {
+                let (bodies, terrain) = plate(half, [0.0, 0.0, -0.02], velocity);
+                let w = terrain.wrenches(&bodies)[0];
+                let v = Vector3::new(velocity[0], velocity[1], 0.0).cast::<f64>();
+                assert!(
+                    w.force_n.dot(&v) < 0.0,
+                    "plate {half:?} moving {velocity:?}: force {:?}",
+                    w.force_n
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn element_force_is_the_angle_form_in_the_plane_of_the_velocity() {
+        let p = params();
+        let mut checked = 0;
+        for i in 0..200 {
+            let t = i as f64;
+            let normal =
+                Vector3::new((1.3 * t).sin(), (0.7 * t + 1.0).cos(), (2.1 * t).sin()).normalize();
+            let velocity = Vector3::new((0.9 * t).cos(), (1.7 * t).sin(), (0.4 * t + 2.0).sin());
+            let force = element_force_n(&p, 0.01, normal, false, 1e-4, velocity);
+            if normal.dot(&velocity) <= 0.0 {
+                assert_eq!(force, Vector3::zeros(), "trailing faces feel nothing");
+                continue;
+            }
+            let horizontal = Vector3::new(velocity.x, velocity.y, 0.0);
+            let forward = horizontal.normalize();
+            let gamma = (-velocity.z).atan2(horizontal.norm());
+            let (nf, nz) = (normal.dot(&forward), normal.z);
+            let beta = nf.atan2(-nz);
+            let (ax, az) = alpha(beta, gamma);
+            let scale = p.zeta_n_m3 * 0.01 * 1e-4 * nf.hypot(nz);
+            let expected = (Vector3::z() * az - forward * ax) * scale;
+            assert!((force - expected).norm() < 1e-9 * expected.norm().max(1e-12));
+            checked += 1;
+        }
+        assert!(checked > 50);
+    }
+
+    #[test]
+    fn slow_elements_feel_a_proportional_force() {
+        let p = params();
+        let force = |speed: f64| {
+            element_force_n(&p, 0.01, -Vector3::z(), false, 1e-4, Vector3::z() * -speed).z
+        };
+        let full = force(1.0);
+        assert!((force(p.reference_speed_m_s) - full).abs() < 1e-12 * full);
+        assert!((force(0.25 * p.reference_speed_m_s) - 0.25 * full).abs() < 1e-12 * full);
+        assert_eq!(force(0.0), 0.0);
+    }
+
+    #[test]
+    fn solid_faces_and_thin_sheets_cover_the_area() {
+        let size = params().element_size_m;
+        let mut out = Vec::new();
+        box_faces(
+            &Pose::IDENTITY,
+            Vec3::new(0.01, 0.005, 0.003),
+            size,
+            &mut out,
+        );
+        let area: f64 = out.iter().map(|e| e.area_m2 as f64).sum();
+        let expected = 8.0 * (0.01 * 0.005 + 0.005 * 0.003 + 0.003 * 0.01);
+        assert!((area - expected).abs() < 1e-6 * expected);
+        let mut tri = Vec::new();
+        let corners = [
+            Vec3::ZERO,
+            Vec3::new(0.02, 0.0, 0.0),
+            Vec3::new(0.0, 0.01, 0.0),
+        ];
+        split_triangle(corners, size, &mut tri);
+        let area: f64 = tri.iter().map(|e| e.area_m2 as f64).sum();
+        assert!((area - 1e-4).abs() < 1e-6 * 1e-4 && tri.len() == 64);
+    }
+}

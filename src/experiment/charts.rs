@@ -1,0 +1,207 @@
+//! The experiment's chart: robot speed against leg curvature, one line per gait frequency, one
+//! panel per terrain model side by side on a common speed axis, with error bars of the spread
+//! of the per-cycle speeds. PNG and SVG, with the plot font of `sandstep analyze`.
+
+use std::path::{Path, PathBuf};
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use super::config::TerrainModel;
+use super::results::RunResult;
+use crate::analysis::plots::{
+    chart, draw_legend, legend_line, line_style, padded_range, register_fonts, DrawResult,
+    PlotError, LABEL_FONT_SIZE, MARKER_RADIUS_PX, PLOT_SIZE,
+};
+
+/// File name (without extension) of the chart.
+pub const SPEED_CHART: &str = "speed_vs_curvature";
+/// Width of a panel (px); the chart is at least [`PLOT_SIZE`] wide.
+const PANEL_WIDTH_PX: u32 = 800;
+/// Half the width of an error bar's caps (curvature units, 1/R).
+const ERROR_CAP_HALF_WIDTH: f64 = 0.025;
+
+/// One plotted point: curvature, mean per-cycle speed, its standard deviation.
+type Point = (f64, f64, f64);
+
+/// The points of one terrain model at one frequency, by curvature; failed runs are left out.
+fn points(runs: &[RunResult], model: TerrainModel, frequency_hz: f64) -> Vec<Point> {
+    let mut points: Vec<Point> = runs
+        .iter()
+        .filter(|r| r.is_ok() && r.terrain_model == model.name() && r.frequency_hz == frequency_hz)
+        .filter_map(|r| {
+            Some((
+                r.curvature_per_r,
+                r.speed_per_cycle_mean_m_s?,
+                r.speed_per_cycle_std_m_s.unwrap_or(0.0),
+            ))
+        })
+        .collect();
+    points.sort_by(|a, b| a.0.total_cmp(&b.0));
+    points
+}
+
+/// Writes `speed_vs_curvature.png` and `.svg` into `dir`: a panel per model in `models`, a
+/// line per frequency in `frequencies_hz`.
+pub fn write_speed_chart(
+    runs: &[RunResult],
+    models: &[TerrainModel],
+    frequencies_hz: &[f64],
+    dir: &Path,
+) -> Result<Vec<PathBuf>, PlotError> {
+    register_fonts()?;
+    let size = (
+        PLOT_SIZE.0.max(PANEL_WIDTH_PX * models.len() as u32),
+        PLOT_SIZE.1,
+    );
+    let png = dir.join(format!("{SPEED_CHART}.png"));
+    let svg = dir.join(format!("{SPEED_CHART}.svg"));
+    let fail = |path: &Path| {
+        let path = path.to_path_buf();
+        move |message: String| PlotError::Draw { path, message }
+    };
+    draw(
+        &BitMapBackend::new(&png, size).into_drawing_area(),
+        runs,
+        models,
+        frequencies_hz,
+    )
+    .map_err(fail(&png))?;
+    draw(
+        &SVGBackend::new(&svg, size).into_drawing_area(),
+        runs,
+        models,
+        frequencies_hz,
+    )
+    .map_err(fail(&svg))?;
+    Ok(vec![png, svg])
+}
+
+fn draw<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    runs: &[RunResult],
+    models: &[TerrainModel],
+    frequencies_hz: &[f64],
+) -> Result<(), String> {
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    // One speed axis for all panels, 0 included.
+    let all: Vec<Point> = models
+        .iter()
+        .flat_map(|&m| frequencies_hz.iter().flat_map(move |&f| points(runs, m, f)))
+        .collect();
+    let speed_range = padded_range(
+        all.iter()
+            .flat_map(|&(_, v, s)| [v - s, v + s])
+            .chain([0.0]),
+    );
+    let panels = root.split_evenly((1, models.len().max(1)));
+    for (panel, &model) in panels.iter().zip(models) {
+        draw_panel(panel, runs, model, frequencies_hz, speed_range.clone())
+            .map_err(|e| e.to_string())?;
+    }
+    root.present().map_err(|e| e.to_string())
+}
+
+fn draw_panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    runs: &[RunResult],
+    model: TerrainModel,
+    frequencies_hz: &[f64],
+    speed_range: std::ops::Range<f64>,
+) -> DrawResult<DB> {
+    let mut chart = chart(
+        area,
+        &format!("Speed vs leg curvature, {}", model.label()),
+        -1.1..1.1,
+        speed_range,
+        "leg curvature (1/R): -1 reversed, 0 straight, +1 C-leg",
+        "speed along x, mean per gait cycle (m/s)",
+    )?;
+    let mut any = false;
+    for (i, &f) in frequencies_hz.iter().enumerate() {
+        let pts = points(runs, model, f);
+        if pts.is_empty() {
+            continue;
+        }
+        any = true;
+        let color = Palette99::pick(i).to_rgba();
+        chart
+            .draw_series(LineSeries::new(
+                pts.iter().map(|&(k, v, _)| (k, v)),
+                line_style(color),
+            ))?
+            .label(format!("{f} Hz (bars: +-1 std of the cycles)"))
+            .legend(legend_line(color));
+        chart.draw_series(
+            pts.iter()
+                .map(|&(k, v, _)| Circle::new((k, v), MARKER_RADIUS_PX, color.filled())),
+        )?;
+        // Error bars: a vertical line from v - s to v + s with caps.
+        chart.draw_series(pts.iter().flat_map(|&(k, v, s)| {
+            let c = ERROR_CAP_HALF_WIDTH;
+            [
+                PathElement::new(vec![(k, v - s), (k, v + s)], line_style(color)),
+                PathElement::new(vec![(k - c, v - s), (k + c, v - s)], line_style(color)),
+                PathElement::new(vec![(k - c, v + s), (k + c, v + s)], line_style(color)),
+            ]
+        }))?;
+    }
+    if any {
+        draw_legend(&mut chart)?;
+    } else {
+        let failed = runs
+            .iter()
+            .filter(|r| r.terrain_model == model.name())
+            .count();
+        chart.draw_series(std::iter::once(Text::new(
+            format!("no results ({failed} runs failed; see results.csv)"),
+            (
+                -0.9,
+                chart.y_range().end - 0.1 * (chart.y_range().end - chart.y_range().start),
+            ),
+            ("sans-serif", LABEL_FONT_SIZE),
+        )))?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn chart_files_are_written_with_a_failed_model_panel() {
+        let dir = tempfile::tempdir().unwrap();
+        let run = |k: f64, f: f64, model: &str, v: f64, ok: bool| RunResult {
+            curvature_per_r: k,
+            frequency_hz: f,
+            terrain_model: model.into(),
+            speed_per_cycle_mean_m_s: ok.then_some(v),
+            speed_per_cycle_std_m_s: ok.then_some(0.1 * v),
+            status: if ok { "ok".into() } else { "failed".into() },
+            ..RunResult::default()
+        };
+        let runs = [
+            run(-1.0, 2.0, "mpm", 0.02, true),
+            run(1.0, 2.0, "mpm", 0.2, true),
+            run(1.0, 1.0, "mpm", 0.1, true),
+            run(1.0, 2.0, "rft", 0.0, false),
+        ];
+        assert_eq!(points(&runs, TerrainModel::Mpm, 2.0).len(), 2);
+        let files = write_speed_chart(
+            &runs,
+            &[TerrainModel::Mpm, TerrainModel::Rft],
+            &[1.0, 2.0],
+            dir.path(),
+        )
+        .unwrap();
+        assert_eq!(files.len(), 2);
+        let png = std::fs::read(&files[0]).unwrap();
+        assert!(png.starts_with(b"\x89PNG"));
+        let svg = std::fs::read_to_string(&files[1]).unwrap();
+        assert!(
+            svg.contains("RFT") && svg.contains("no results"),
+            "{svg:.200}"
+        );
+    }
+}

