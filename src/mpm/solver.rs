@@ -135,8 +135,6 @@ struct BadParticle {
 #[derive(Clone, Debug, Default)]
 struct G2pSummary {
     max_speed_sq: f32,
-    /// Largest `1 / det F_p`: how far the most compressed particle is compressed.
-    max_inverse_jacobian: f32,
     bad: Option<BadParticle>,
     /// Penalty impulses per collider (empty where no particle is near one).
     impulses: Vec<ColliderImpulse>,
@@ -150,7 +148,6 @@ impl G2pSummary {
         };
         G2pSummary {
             max_speed_sq: self.max_speed_sq.max(other.max_speed_sq),
-            max_inverse_jacobian: self.max_inverse_jacobian.max(other.max_inverse_jacobian),
             bad,
             impulses: add_impulses(self.impulses, &other.impulses),
         }
@@ -180,9 +177,6 @@ pub struct Solver {
     tagged: bool,
     /// Largest particle speed after the last substep (m/s).
     max_speed_m_s: f32,
-    /// How much faster waves run in the most compressed particle than in undeformed material
-    /// after the last substep (>= 1; [`compressed_wave_speed_factor`]).
-    wave_speed_factor: f32,
     /// Simulated time (s).
     pub time_s: f64,
     /// Substeps taken.
@@ -210,7 +204,6 @@ impl Solver {
             colours: GridColours::default(),
             tagged: false,
             max_speed_m_s: 0.0,
-            wave_speed_factor: 1.0,
             time_s: 0.0,
             steps: 0,
             stage_times: StageTimes::default(),
@@ -239,8 +232,7 @@ impl Solver {
                     .materials
                     .iter()
                     .map(|m| m.wave_speed_m_s())
-                    .fold(0.0, f32::max)
-                    * self.wave_speed_factor;
+                    .fold(0.0, f32::max);
                 (cfl * self.settings.dx / (c + self.max_speed_m_s)).min(max_dt_s)
             }
         }
@@ -550,7 +542,6 @@ impl Solver {
             .into_iter()
             .fold(G2pSummary::default(), G2pSummary::merge);
         self.max_speed_m_s = summary.max_speed_sq.sqrt();
-        self.wave_speed_factor = compressed_wave_speed_factor(summary.max_inverse_jacobian);
         match summary.bad {
             None => Ok(summary.impulses),
             Some(bad) => Err(SimError::BlowUp {
@@ -563,20 +554,6 @@ impl Solver {
                 velocity: self.particles.velocity[bad.index].into(),
             }),
         }
-    }
-}
-
-/// Factor on the undeformed dilatational wave speed for material compressed to `J = 1 /
-/// inverse_jacobian` (>= 1). Under the Hencky law the pressure is `p = -K ln J / J` and the
-/// density `rho0 / J`, so `c^2 = dp/drho = (K / rho0) (1 - ln J)`: waves speed up as the
-/// material is compressed (1.8 times at J = 0.1), and a CFL step from the undeformed speed
-/// would be too long. Stretched material (J > 1) keeps factor 1; a non-finite J gives 1 (the
-/// blow-up check reports it).
-pub fn compressed_wave_speed_factor(inverse_jacobian: f32) -> f32 {
-    if inverse_jacobian.is_finite() && inverse_jacobian > 1.0 {
-        (1.0 + inverse_jacobian.ln()).sqrt()
-    } else {
-        1.0
     }
 }
 
@@ -716,9 +693,6 @@ fn grid_to_particle_block(cx: &G2pContext, view: G2pView, pb: &ParticleBlock) ->
             let (x, v) = (view.position[i], view.velocity[i]);
             let speed_sq = v.norm_squared();
             summary.max_speed_sq = summary.max_speed_sq.max(speed_sq);
-            summary.max_inverse_jacobian = summary
-                .max_inverse_jacobian
-                .max(f[lane].determinant().recip());
             if summary.bad.is_none() {
                 let finite = (x.sum() + speed_sq + tau[lane].sum() + f[lane].sum()).is_finite();
                 let what = if !finite {
@@ -1153,54 +1127,6 @@ mod tests {
 
     fn close(a: Vector3<f64>, b: Vector3<f64>, scale: f64) -> bool {
         (a - b).norm() <= 1e-5 * scale
-    }
-
-    #[test]
-    fn the_adaptive_step_shortens_with_the_wave_speed_of_compressed_material() {
-        assert_eq!(compressed_wave_speed_factor(1.0), 1.0);
-        assert_eq!(
-            compressed_wave_speed_factor(0.5),
-            1.0,
-            "stretched: the undeformed speed"
-        );
-        assert_eq!(compressed_wave_speed_factor(f32::INFINITY), 1.0);
-        // J = 0.1: c^2 = c0^2 (1 - ln 0.1).
-        let expected = (1.0 - 0.1f32.ln()).sqrt();
-        assert!((compressed_wave_speed_factor(10.0) - expected).abs() < 1e-6);
-        // A block at rest, once undeformed and once compressed to J = 0.125 (F = I / 2): the
-        // step after a substep is shorter by the factor (to the J change of one substep).
-        let dt_after_one_substep = |f: Matrix3<f32>| {
-            let mut settings = settings(Vector3::zeros(), Walls::all(Wall::Slip));
-            settings.time_step = TimeStep::Adaptive {
-                cfl: 0.4,
-                max_dt_s: 1.0,
-            };
-            let mut s = Solver::new(settings, vec![jelly()]);
-            s.add_particles((0..64).map(|k| NewParticle {
-                position: Vector3::new(
-                    0.1 + 0.005 * (k % 4) as f32,
-                    0.1 + 0.005 * ((k / 4) % 4) as f32,
-                    0.1 + 0.005 * (k / 16) as f32,
-                ),
-                velocity: Vector3::zeros(),
-                mass: 1e-3,
-                volume: 1e-6,
-                material: 0,
-            }));
-            for p in 0..s.particles.len() {
-                s.particles.deformation[p] = f;
-            }
-            s.substep().unwrap();
-            s.next_dt()
-        };
-        let undeformed = dt_after_one_substep(Matrix3::identity());
-        let compressed = dt_after_one_substep(Matrix3::identity() * 0.5);
-        let ratio = undeformed / compressed;
-        let expected = (1.0 - 0.125f32.ln()).sqrt();
-        assert!(
-            (ratio - expected).abs() < 0.05 * expected,
-            "dt ratio {ratio}, expected {expected}"
-        );
     }
 
     #[test]
