@@ -69,7 +69,7 @@
 
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 
-use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Vector3};
+use nalgebra::{DVector, Matrix3, Matrix6, Vector3, Vector6};
 use rapier3d::glamx::Vec3;
 use rapier3d::prelude::{
     ColliderSet, MultibodyIndex, MultibodyJointSet, Pose, RigidBody, RigidBodyHandle, RigidBodySet,
@@ -565,22 +565,30 @@ impl RftTerrain {
             let Some(mb) = multibodies.get_multibody_mut(index) else {
                 continue;
             };
-            let baseline = match self.armatures.iter().find(|(m, _)| *m == index) {
-                Some((_, a)) => a.clone(),
+            // The armature without the terrain, kept from the first step.
+            let slot = match self.armatures.iter().position(|(m, _)| *m == index) {
+                Some(slot) => slot,
                 None => {
                     self.armatures.push((index, mb.armature().clone()));
-                    mb.armature().clone()
+                    self.armatures.len() - 1
                 }
             };
+            let baseline = &self.armatures[slot].1;
+            // Only the diagonal of `C_q = sum J^T C J` is used: `(C_q)_kk = sum j_k^T C j_k`
+            // over the links' Jacobian columns `j_k`.
             let ndofs = mb.ndofs();
-            let mut generalized = DMatrix::<f64>::zeros(ndofs, ndofs);
+            let mut diagonal = vec![0.0f64; ndofs];
             for (link, damper) in &links {
-                let jacobian = mb.body_jacobian(*link).clone().cast::<f64>();
-                generalized += jacobian.transpose() * damper * &jacobian;
+                let jacobian = mb.body_jacobian(*link);
+                for (k, d) in diagonal.iter_mut().enumerate() {
+                    let column: Vector6<f64> =
+                        jacobian.fixed_view::<6, 1>(0, k).into_owned().cast();
+                    *d += column.dot(&(damper * column));
+                }
             }
             let armature = mb.armature_mut();
             for k in 0..ndofs.min(armature.len()) {
-                armature[k] = baseline[k] + (dt_s * generalized[(k, k)].max(0.0)) as f32;
+                armature[k] = baseline[k] + (dt_s * diagonal[k].max(0.0)) as f32;
             }
         }
         wrenches

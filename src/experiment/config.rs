@@ -139,9 +139,7 @@ impl Experiment {
             deserialize_with_overrides(text, overrides).map_err(|e| ExperimentError::Parse {
                 file: file.to_path_buf(),
                 message: match e {
-                    YamlProblem::Parse { path, message } => {
-                        YamlProblem::parse_message(&path, &message)
-                    }
+                    YamlProblem::Parse(message) => message,
                     YamlProblem::Override(e) => e.to_string(),
                 },
             })?;

@@ -286,9 +286,6 @@ fn yaml_scalar(value: &str) -> String {
 }
 
 /// The base scene with the run's URDF, frequency and terrain model.
-///
-/// A base scene that has no `terrain` section at all (before the RFT model existed, MPM was
-/// the only terrain) runs `mpm` without the override.
 fn run_scene(experiment: &Experiment, spec: &RunSpec, urdf: &Path) -> Result<Scene, SceneError> {
     let cfg = &experiment.config;
     let mut overrides = cfg.overrides.clone();
@@ -297,17 +294,8 @@ fn run_scene(experiment: &Experiment, spec: &RunSpec, urdf: &Path) -> Result<Sce
         yaml_scalar(&urdf.display().to_string())
     ));
     overrides.push(format!("robot.gait.frequency_hz={}", spec.frequency_hz));
-    let mut with_model = overrides.clone();
-    with_model.push(format!("terrain.model={}", spec.terrain_model.name()));
-    match Scene::load(&cfg.base_scene, &with_model) {
-        Err(SceneError::Parse { message, .. })
-            if spec.terrain_model == TerrainModel::Mpm
-                && message.contains("unknown field `terrain`") =>
-        {
-            Scene::load(&cfg.base_scene, &overrides)
-        }
-        other => other,
-    }
+    overrides.push(format!("terrain.model={}", spec.terrain_model.name()));
+    Scene::load(&cfg.base_scene, &overrides)
 }
 
 /// Follows a run: the progress bar, the robot's mass and its latest metrics.

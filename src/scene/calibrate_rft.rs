@@ -100,14 +100,7 @@ pub fn calibrate_rft(scene: &Scene) -> Result<RftCalibration, CalibrationError> 
             min_m: [0.0; 3],
             // Room for heaved sand: one plate side above the surface.
             max_m: [c.bed_side_m, c.bed_side_m, c.bed_depth_m + c.plate_side_m],
-            walls: WallsConfig {
-                x_min: slip,
-                x_max: slip,
-                y_min: slip,
-                y_max: slip,
-                z_min: slip,
-                z_max: slip,
-            },
+            walls: WallsConfig::all(slip),
         },
         dx_m: c.dx_m,
         solver: super::config::SolverConfig {

@@ -73,15 +73,7 @@ pub struct DomainConfig {
 }
 
 fn default_walls() -> WallsConfig {
-    let slip = WallConfig(Wall::Slip);
-    WallsConfig {
-        x_min: slip,
-        x_max: slip,
-        y_min: slip,
-        y_max: slip,
-        z_min: slip,
-        z_max: slip,
-    }
+    WallsConfig::all(WallConfig(Wall::Slip))
 }
 
 /// The six walls; each `sticky`, `slip` or `{friction: <coefficient>}`. Default: slip.
@@ -100,6 +92,20 @@ pub struct WallsConfig {
     pub z_min: WallConfig,
     #[serde(default = "slip")]
     pub z_max: WallConfig,
+}
+
+impl WallsConfig {
+    /// The same wall on all six sides.
+    pub fn all(wall: WallConfig) -> Self {
+        WallsConfig {
+            x_min: wall,
+            x_max: wall,
+            y_min: wall,
+            y_max: wall,
+            z_min: wall,
+            z_max: wall,
+        }
+    }
 }
 
 fn slip() -> WallConfig {

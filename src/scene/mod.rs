@@ -59,9 +59,9 @@ impl Scene {
     pub fn from_yaml(text: &str, file: &Path, overrides: &[String]) -> Result<Scene, SceneError> {
         let config: SceneConfig =
             overrides::deserialize_with_overrides(text, overrides).map_err(|e| match e {
-                overrides::YamlProblem::Parse { path, message } => SceneError::Parse {
+                overrides::YamlProblem::Parse(message) => SceneError::Parse {
                     file: file.to_path_buf(),
-                    message: overrides::YamlProblem::parse_message(&path, &message),
+                    message,
                 },
                 overrides::YamlProblem::Override(e) => e,
             })?;

@@ -8,22 +8,11 @@ use super::SceneError;
 /// Why [`deserialize_with_overrides`] failed.
 #[derive(Debug)]
 pub enum YamlProblem {
-    /// The text is not YAML, or does not fit the type: the path of the offending field (`.`
-    /// for the document) and the message.
-    Parse { path: String, message: String },
+    /// The text is not YAML, or does not fit the type: `path: message` (the message alone
+    /// for the whole document).
+    Parse(String),
     /// An assignment could not be applied.
     Override(SceneError),
-}
-
-impl YamlProblem {
-    /// `path: message` (the message alone for the document), for errors that name the file.
-    pub fn parse_message(path: &str, message: &str) -> String {
-        if path == "." {
-            message.to_string()
-        } else {
-            format!("{path}: {message}")
-        }
-    }
 }
 
 /// Deserializes YAML `text` after applying the `key.path=value` assignments in order. Without
@@ -32,7 +21,13 @@ pub fn deserialize_with_overrides<T: DeserializeOwned>(
     text: &str,
     overrides: &[String],
 ) -> Result<T, YamlProblem> {
-    let parse = |path: String, message: String| YamlProblem::Parse { path, message };
+    let parse = |path: String, message: String| {
+        YamlProblem::Parse(if path == "." {
+            message
+        } else {
+            format!("{path}: {message}")
+        })
+    };
     if overrides.is_empty() {
         let de = serde_yaml_ng::Deserializer::from_str(text);
         return serde_path_to_error::deserialize(de)
