@@ -163,6 +163,16 @@ fn terrain_values_out_of_range() {
         ),
         (
             robot_scene,
+            "terrain.rft.max_dt_s=0.05",
+            "terrain.rft.max_dt_s",
+        ),
+        (
+            robot_scene,
+            "terrain.rft.max_dt_s=soon",
+            "terrain.rft.max_dt_s",
+        ),
+        (
+            robot_scene,
             "terrain.rft.surface_height_m=-0.1",
             "terrain.rft.surface_height_m",
         ),

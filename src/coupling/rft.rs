@@ -388,6 +388,17 @@ fn add_point_damper(damper: &mut Matrix6<f64>, c: f64, r: Vector3<f64>) {
     *damper += block * c;
 }
 
+/// Adds a vertical spring of stiffness `k` (N/m) at arm `r` (m) from a body's centre of mass to
+/// `stiffness`, the 6x6 matrix K with `wrench = -K displacement` (displacement: the centre of
+/// mass's and a small rotation, world axes): the point rises by `g . (dx, dtheta)` with
+/// `g = (e_z, r x e_z)`, so `K += k g g^T`.
+fn add_point_depth_spring(stiffness: &mut Matrix6<f64>, k: f64, r: Vector3<f64>) {
+    let mut g = Vector6::zeros();
+    g[2] = 1.0;
+    g.fixed_rows_mut::<3>(3).copy_from(&r.cross(&Vector3::z()));
+    *stiffness += g * g.transpose() * k;
+}
+
 /// Errors building an RFT terrain.
 #[derive(thiserror::Error, Debug, Clone, PartialEq)]
 pub enum RftError {
@@ -397,30 +408,38 @@ pub enum RftError {
     Elements { name: String, message: String },
 }
 
-/// The dampers of one multibody's links in the terrain: (link id, 6x6 damper about the link's
-/// centre of mass).
-type LinkDampers = Vec<(usize, Matrix6<f64>)>;
+/// The implicit terms of one multibody's links in the terrain: (link id, 6x6 `dt C + dt^2 K`
+/// about the link's centre of mass).
+type LinkImplicitTerms = Vec<(usize, Matrix6<f64>)>;
 
 /// A flat RFT terrain and the bodies it acts on.
 ///
-/// [`Self::apply`] sets each body's RFT wrench `W(u_n)` at the start of a step as its user
-/// force, and makes the step linearly implicit in the terrain's damping. The RFT force falls to
-/// zero with the speed below v_ref and flips with the direction of motion: explicitly, a 2 g
-/// leg held in the sand by its motor chatters (its speed jumps by `|F| dt r^2 / I` each step,
-/// about 1.5 rad/s at 0.5 ms), and the chatter walks the robot. Each element acts like a
-/// damper of coefficient `c = |F_full| / max(|v|, v_ref)` (the exact slope of the regularised
-/// force below v_ref, the secant above); summed per link (`C_l`, 6x6, about its centre of mass)
-/// and mapped into the multibody's generalized coordinates with rapier's link Jacobians
-/// (`C_q = sum J_l^T C_l J_l`), its diagonal `D` is added for the step as armature `dt D` to
-/// rapier's mass matrix. Rapier then solves `(M + dt D) (u_{n+1} - u_n) = dt (W(u_n) + other
-/// forces)`: the terrain force is `W(u_n) - D (u_{n+1} - u_n)`, the wrench linearised at the
-/// end of the step with the diagonal of its slope (exact in steady motion; the off-diagonal
-/// couplings stay explicit). Measured: a standing robot settles without chatter, and walking
-/// speeds agree within 5 % between 1 ms and 0.25 ms steps (`docs/physics.md`). Bodies that are
-/// not multibody links get the explicit wrench only. (A full-matrix bound such as Gershgorin's
-/// row sums over-damps the body's coupled degrees of freedom and made the robot tumble on
-/// stiff ground; velocity motors on joints to a fixed body left an unconverged solver velocity
-/// that the robot rode on.)
+/// [`Self::apply`] sets each body's RFT wrench at the start of a step as its user force, and
+/// makes the step linearly implicit in the terrain's damping and depth stiffness.
+///
+/// Damping: the RFT force falls to zero with the speed below v_ref and flips with the
+/// direction of motion: explicitly, a 2 g leg held in the sand by its motor chatters (its
+/// speed jumps by `|F| dt r^2 / I` each step, about 1.5 rad/s at 0.5 ms), and the chatter walks
+/// the robot. Each element acts like a damper of coefficient `c = |F_full| / max(|v|, v_ref)`
+/// (the exact slope of the regularised force below v_ref, the secant above).
+///
+/// Stiffness: the force grows linearly with depth, a vertical spring `k = F_z / d` per element;
+/// on the default (calibrated) zeta explicit depth forces walked the robot 11 % too far at
+/// 1 ms steps and tipped it at 4 ms. Each element's force is taken at its depth predicted at
+/// the end of the step, `d - dt v_z` (`F(x_n) + dt dF/dx v_n`), and `dt^2 k` joins the
+/// implicit matrix.
+///
+/// Both are summed per link (`dt C_l + dt^2 K_l`, 6x6, about its centre of mass) and mapped into
+/// the multibody's generalized coordinates with rapier's link Jacobians (`sum J_l^T (..) J_l`);
+/// the diagonal `D` is added for the step as armature to rapier's mass matrix. Rapier then
+/// solves `(M + D) (u_{n+1} - u_n) = dt (W + other forces)`: linearly implicit Euler with the
+/// diagonal of the terrain's Jacobian (the off-diagonal couplings stay explicit). Measured
+/// (tests/rft.rs): a standing robot settles without chatter, and the walk with the `auto` step
+/// (1 ms on the default zeta, 8 ms on poppy seeds) is within 3 % of 0.25 ms steps. Bodies that
+/// are not multibody links get the explicit wrench only. (A full-matrix bound such as
+/// Gershgorin's row sums over-damps the body's coupled degrees of freedom and made the robot
+/// tumble on stiff ground; velocity motors on joints to a fixed body left an unconverged solver
+/// velocity that the robot rode on.)
 #[derive(Clone, Debug)]
 pub struct RftTerrain {
     params: RftParams,
@@ -491,29 +510,33 @@ impl RftTerrain {
     pub fn wrenches(&self, bodies: &RigidBodySet) -> Vec<BodyWrench> {
         self.bodies
             .iter()
-            .map(|b| self.body_wrench(&bodies[b.body], b).0)
+            .map(|b| self.body_wrench(&bodies[b.body], b, 0.0).0)
             .collect()
     }
 
-    /// The wrench on `body` (rigid body `rb`) and its damper (type docs, [`add_point_damper`]).
-    fn body_wrench(&self, rb: &RigidBody, body: &RftBody) -> (BodyWrench, Matrix6<f64>) {
+    /// The wrench on `body` (rigid body `rb`) and the 6x6 matrix `dt C + dt^2 K` of its damper
+    /// C and depth stiffness K (type docs, [`add_point_damper`], [`add_point_depth_spring`]),
+    /// with every element's depth predicted `dt_s` ahead (`dt_s` = 0: the present wrench).
+    fn body_wrench(&self, rb: &RigidBody, body: &RftBody, dt_s: f64) -> (BodyWrench, Matrix6<f64>) {
         let mut wrench = BodyWrench::default();
-        let mut damper = Matrix6::zeros();
+        let mut implicit = Matrix6::zeros();
         let pose = rb.position();
         if (pose.translation.z - body.reach_m) as f64 > self.params.surface_height_m {
-            return (wrench, damper);
+            return (wrench, implicit);
         }
         let com = to_f64(rb.center_of_mass());
         let (linvel, angvel) = (to_f64(rb.linvel()), to_f64(rb.angvel()));
         let v_ref = self.params.reference_speed_m_s;
         for e in &body.elements {
             let centre = to_f64(pose.transform_point(e.centre_m));
-            let depth_m = self.params.surface_height_m - centre.z;
+            let arm = centre - com;
+            let velocity = linvel + angvel.cross(&arm);
+            // Depth at the end of the step if the element keeps its velocity: the force is
+            // `F(d_n) + dt dF/dx v_n`, the explicit half of the linearly implicit spring.
+            let depth_m = self.params.surface_height_m - centre.z - dt_s * velocity.z;
             if depth_m <= 0.0 {
                 continue;
             }
-            let arm = centre - com;
-            let velocity = linvel + angvel.cross(&arm);
             let full = element_stress_n_m2(
                 &self.params,
                 depth_m,
@@ -525,18 +548,21 @@ impl RftTerrain {
             let force = full * (speed / v_ref).min(1.0);
             let magnitude = full.norm();
             if magnitude > 0.0 {
-                add_point_damper(&mut damper, magnitude / speed.max(v_ref), arm);
+                add_point_damper(&mut implicit, dt_s * magnitude / speed.max(v_ref), arm);
+                // The force grows linearly with depth: vertical stiffness F_z / d (N/m).
+                let stiffness = force.z.max(0.0) / depth_m;
+                add_point_depth_spring(&mut implicit, dt_s * dt_s * stiffness, arm);
             }
             wrench.force_n += force;
             wrench.torque_n_m += arm.cross(&force);
         }
-        (wrench, damper)
+        (wrench, implicit)
     }
 
-    /// Sets each body's RFT wrench at its present state as its user force and torque (the
-    /// previous ones are replaced; multibody links take loads this way), and the terrain's
-    /// damping as armature `dt_s D` on the multibodies' degrees of freedom, for the next rapier
-    /// step, which must be `dt_s` seconds long (type docs). Returns the wrenches.
+    /// Sets each body's RFT wrench (depths predicted `dt_s` ahead) as its user force and torque
+    /// (the previous ones are replaced; multibody links take loads this way), and the
+    /// terrain's implicit terms as armature on the multibodies' degrees of freedom, for the
+    /// next rapier step, which must be `dt_s` seconds long (type docs). Returns the wrenches.
     pub fn apply(
         &mut self,
         bodies: &mut RigidBodySet,
@@ -544,10 +570,10 @@ impl RftTerrain {
         dt_s: f64,
     ) -> Vec<BodyWrench> {
         let mut wrenches = Vec::with_capacity(self.bodies.len());
-        // Per multibody: (link id, damper) of its links in the terrain.
-        let mut dampers: Vec<(MultibodyIndex, LinkDampers)> = Vec::new();
+        // Per multibody: (link id, dt C + dt^2 K) of its links in the terrain.
+        let mut dampers: Vec<(MultibodyIndex, LinkImplicitTerms)> = Vec::new();
         for b in &self.bodies {
-            let (wrench, damper) = self.body_wrench(&bodies[b.body], b);
+            let (wrench, implicit) = self.body_wrench(&bodies[b.body], b, dt_s);
             let rb = &mut bodies[b.body];
             rb.reset_forces(false);
             rb.reset_torques(false);
@@ -556,8 +582,8 @@ impl RftTerrain {
             wrenches.push(wrench);
             if let Some(link) = multibodies.rigid_body_link(b.body) {
                 match dampers.iter_mut().find(|(m, _)| *m == link.multibody) {
-                    Some((_, links)) => links.push((link.id, damper)),
-                    None => dampers.push((link.multibody, vec![(link.id, damper)])),
+                    Some((_, links)) => links.push((link.id, implicit)),
+                    None => dampers.push((link.multibody, vec![(link.id, implicit)])),
                 }
             }
         }
@@ -574,21 +600,21 @@ impl RftTerrain {
                 }
             };
             let baseline = &self.armatures[slot].1;
-            // Only the diagonal of `C_q = sum J^T C J` is used: `(C_q)_kk = sum j_k^T C j_k`
-            // over the links' Jacobian columns `j_k`.
+            // Only the diagonal of `sum J^T (dt C + dt^2 K) J` is used: its k-th entry is
+            // `sum j_k^T (dt C + dt^2 K) j_k` over the links' Jacobian columns `j_k`.
             let ndofs = mb.ndofs();
             let mut diagonal = vec![0.0f64; ndofs];
-            for (link, damper) in &links {
+            for (link, implicit) in &links {
                 let jacobian = mb.body_jacobian(*link);
                 for (k, d) in diagonal.iter_mut().enumerate() {
                     let column: Vector6<f64> =
                         jacobian.fixed_view::<6, 1>(0, k).into_owned().cast();
-                    *d += column.dot(&(damper * column));
+                    *d += column.dot(&(implicit * column));
                 }
             }
             let armature = mb.armature_mut();
             for k in 0..ndofs.min(armature.len()) {
-                armature[k] = baseline[k] + (dt_s * diagonal[k].max(0.0)) as f32;
+                armature[k] = baseline[k] + diagonal[k].max(0.0) as f32;
             }
         }
         wrenches

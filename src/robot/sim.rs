@@ -276,15 +276,23 @@ impl RobotSim {
             return;
         }
         let substeps = (dt / self.max_dt_s).ceil().max(1.0);
-        let h = dt / substeps;
-        self.world.integration_parameters.dt = h as f32;
         for _ in 0..substeps as usize {
-            self.gait.advance(h);
-            self.drive_motors();
-            self.world.step();
-            self.time_s += h;
-            self.record_step();
+            self.single_step(dt / substeps);
         }
+    }
+
+    /// Advances by one rapier step of `dt_s` seconds, whatever `max_dt_s`: for forces computed
+    /// for exactly this step (the RFT terrain's implicit terms).
+    pub fn single_step(&mut self, dt_s: f64) {
+        if dt_s.is_nan() || dt_s <= 0.0 {
+            return;
+        }
+        self.world.integration_parameters.dt = dt_s as f32;
+        self.gait.advance(dt_s);
+        self.drive_motors();
+        self.world.step();
+        self.time_s += dt_s;
+        self.record_step();
     }
 
     /// Sets each leg motor's target and torque limit from the gait at the end of this step.

@@ -75,8 +75,8 @@ enum Kind {
     RobotOnRft {
         robot: Box<RobotSim>,
         terrain: RftTerrain,
-        /// Largest step with one set of RFT forces (s).
-        max_dt_s: f64,
+        /// Largest rapier step, each with one set of RFT forces (s): `terrain.rft.max_dt_s`.
+        step_s: f64,
         /// Per leg, in [`LEGS`] order.
         leg_impulses: Vec<ImpulseSum>,
         /// Simulated time the impulses were summed over (s).
@@ -107,7 +107,7 @@ impl Simulation {
             let terrain = robot_rft_terrain(&robot, &config.terrain.rft)?;
             return Ok(Simulation {
                 kind: Kind::RobotOnRft {
-                    max_dt_s: config.terrain.rft.max_dt_s.min(robot.max_dt_s()),
+                    step_s: config.terrain.rft.step_s(),
                     robot,
                     terrain,
                     leg_impulses: vec![ImpulseSum::default(); LEGS.len()],
@@ -201,14 +201,14 @@ impl Simulation {
             Kind::RobotOnRft {
                 robot,
                 terrain,
-                max_dt_s,
+                step_s,
                 leg_impulses,
                 impulse_time_s,
             } => {
                 let remaining = target_s - robot.time_s();
                 if remaining > 0.0 {
-                    // Equal steps of at most max_dt_s, each with the forces of its start.
-                    let steps = (remaining / *max_dt_s * (1.0 - STEP_COUNT_SLACK))
+                    // Equal rapier steps of at most step_s, each with the forces of its start.
+                    let steps = (remaining / *step_s * (1.0 - STEP_COUNT_SLACK))
                         .ceil()
                         .max(1.0) as u64;
                     let dt = remaining / steps as f64;
@@ -218,7 +218,7 @@ impl Simulation {
                             terrain.apply(&mut world.bodies, &mut world.multibody_joints, dt);
                         accumulate_rft_leg_impulses(robot, terrain, &wrenches, dt, leg_impulses);
                         *impulse_time_s += dt;
-                        robot.step(dt as f32);
+                        robot.single_step(dt);
                         check_robot(robot)?;
                         self.steps += 1;
                     }

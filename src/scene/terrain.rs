@@ -1,7 +1,7 @@
 //! The `terrain:` section of a scene: what the robot walks on. `model: mpm` (the default) is
 //! the MPM sand of the `sand` section, coupled by CPIC; `model: rft` is resistive force theory
 //! (`crate::coupling::rft`, `docs/physics.md`), a flat granular surface whose resistance is
-//! computed per surface element, many times faster than real time. With `rft` the `sand`
+//! computed per surface element, 3 to 16 times faster than real time. With `rft` the `sand`
 //! section is not simulated (it stays loadable, so one file switches with
 //! `--set terrain.model=rft`, and `sandstep calibrate-rft` reads its material), and the rigid
 //! floor `robot.ground.height_m` stays the bed's bottom.
@@ -61,10 +61,10 @@ pub struct RftConfig {
     /// Regularisation speed v_ref (m/s), > 0: an element slower than this feels the fraction
     /// |v| / v_ref of its RFT force. Default 0.01.
     pub reference_speed_m_s: f64,
-    /// Largest rapier step with RFT forces (s), > 0; the robot's `physics.max_dt_s` also
-    /// bounds it. The forces are computed once per step. Default 0.001 (walking speeds agree
-    /// within 5 % with 0.00025: docs/physics.md).
-    pub max_dt_s: f64,
+    /// The rapier step with RFT forces: `auto` (the default, [`RftStep::seconds`]) or a
+    /// number of seconds in (0, 0.01]. The forces and their implicit terms are computed once
+    /// per step; `robot.physics.max_dt_s` does not apply.
+    pub max_dt_s: RftStep,
     /// The MPM plate test of `sandstep calibrate-rft`.
     pub calibration: RftCalibrationConfig,
 }
@@ -76,13 +76,58 @@ impl Default for RftConfig {
             surface_height_m: 0.0,
             element_size_m: 0.005,
             reference_speed_m_s: 0.01,
-            max_dt_s: 0.001,
+            max_dt_s: RftStep::Auto(AutoKeyword::Auto),
             calibration: RftCalibrationConfig::default(),
         }
     }
 }
 
+/// Largest RFT step of `auto` (s): at 2 Hz the hexapod walks within 1 % of its 0.25 ms speed
+/// with 8 ms steps on poppy seeds and 10 % slower with 10 ms (the legs turn 0.13 rad a step).
+pub const RFT_AUTO_MAX_DT_S: f64 = 0.008;
+
+/// `auto` step times the square root of zeta (s (N/m^3)^(1/2)): the period of the terrain's
+/// stiffness `zeta A` against the robot's inertia scales as `1/sqrt(zeta)`. Measured on the
+/// hexapod at 2 Hz (speed over 4 s within 2 % of 0.25 ms steps): 4 ms at zeta = 3e6, 1 ms at
+/// 4.46e7 (3.5 %; 2 ms is 12 % off). docs/physics.md, "Resistive force theory".
+pub const RFT_AUTO_STEP_SQRT_ZETA: f64 = 6.9;
+
+/// Largest accepted RFT step (s), as for rapier's steps on rigid ground.
+pub const RFT_MAX_DT_S: f64 = 0.01;
+
+/// `terrain.rft.max_dt_s`: `auto` or seconds.
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
+#[serde(untagged, expecting = "a step in seconds or `auto`")]
+pub enum RftStep {
+    Auto(AutoKeyword),
+    Seconds(f64),
+}
+
+/// The word `auto`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AutoKeyword {
+    Auto,
+}
+
+impl RftStep {
+    /// The step (s) on a medium of scale `zeta_n_m3`: `auto` is
+    /// `min(RFT_AUTO_MAX_DT_S, RFT_AUTO_STEP_SQRT_ZETA / sqrt(zeta))`, 1.03 ms on the default
+    /// zeta and 8 ms on poppy seeds.
+    pub fn seconds(self, zeta_n_m3: f64) -> f64 {
+        match self {
+            RftStep::Seconds(s) => s,
+            RftStep::Auto(_) => (RFT_AUTO_STEP_SQRT_ZETA / zeta_n_m3.sqrt()).min(RFT_AUTO_MAX_DT_S),
+        }
+    }
+}
+
 impl RftConfig {
+    /// The rapier step with RFT forces (s), `max_dt_s` resolved.
+    pub fn step_s(&self) -> f64 {
+        self.max_dt_s.seconds(self.zeta_n_m3)
+    }
+
     /// The parameters of the RFT terrain model.
     pub fn params(&self) -> RftParams {
         RftParams {
@@ -156,7 +201,15 @@ pub fn validate(scene: &Scene) -> Result<(), SceneError> {
     positive("zeta_n_m3", rft.zeta_n_m3)?;
     positive("element_size_m", rft.element_size_m)?;
     positive("reference_speed_m_s", rft.reference_speed_m_s)?;
-    positive("max_dt_s", rft.max_dt_s)?;
+    if let RftStep::Seconds(step) = rft.max_dt_s {
+        positive("max_dt_s", step)?;
+        if step > RFT_MAX_DT_S {
+            return Err(scene.invalid(
+                field("max_dt_s"),
+                format!("{step} s must be at most {RFT_MAX_DT_S} s"),
+            ));
+        }
+    }
     if !rft.surface_height_m.is_finite() {
         return Err(scene.invalid(field("surface_height_m"), "must be finite"));
     }
