@@ -6,8 +6,11 @@ use nalgebra::Vector3;
 use serde::Serialize;
 use serde_json::{Map, Value};
 
+use crate::mpm::kernel::Kernel;
 use crate::mpm::material::{Constitutive, DruckerPrager, Lame};
-use crate::mpm::{NewParticle, Solver, SolverMaterial, SolverSettings, TimeStep, Wall, Walls};
+use crate::mpm::{
+    NewParticle, Solver, SolverMaterial, SolverSettings, TimeStep, Transfer, Wall, Walls,
+};
 
 /// Benchmark sand: Klar et al. (2016) parameters.
 const DENSITY_KG_M3: f32 = 2200.0;
@@ -70,6 +73,8 @@ pub fn sand_block(particles: usize) -> Solver {
             max_dt_s: 1e-3,
         },
         blowup_speed_m_s: 100.0,
+        transfer: Transfer::Apic,
+        kernel: Kernel::QuadraticBspline,
     };
     let mut solver = Solver::new(settings, vec![material]);
     let spacing = DX_M / PARTICLES_PER_EDGE as f32;

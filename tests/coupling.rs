@@ -1,121 +1,17 @@
 //! Sand against rigid bodies (CPIC, `docs/physics.md` section 4): leaks through thin parts,
-//! momentum exchange.
-
-use std::path::Path;
+//! momentum exchange. (CPIC against the plain grid boundary: `tests/stability.rs`.)
 
 use nalgebra::Vector3;
 use rapier3d::glamx::Vec3;
 use rapier3d::prelude::{
-    ColliderBuilder, PhysicsWorld, Pose, RigidBodyBuilder, RigidBodyHandle, RigidBodySet,
-    SharedShape,
+    ColliderBuilder, PhysicsWorld, RigidBodyBuilder, RigidBodyHandle, RigidBodySet, SharedShape,
 };
 use sandstep::coupling::plate::{depth_cell_means, fit_line, press_plate, PlatePress};
-use sandstep::coupling::{Coupling, CouplingMethod, CouplingMode, CpicSurface, SandCollider};
+use sandstep::coupling::{Coupling, CouplingMode, CpicSurface};
 use sandstep::mpm::Solver;
-use sandstep::scene::Scene;
 
-const DX: f32 = 0.005;
-const SAND: &str = "{model: drucker_prager, density_kg_m3: 1600, youngs_modulus_pa: 3.5e5, \
-                    poisson_ratio: 0.3, friction_angle_deg: 35}";
-
-/// A solver from YAML snippets: domain max corner, gravity and sand bodies.
-fn solver(max_m: [f32; 3], gravity: [f32; 3], bodies: &str) -> Solver {
-    let text = format!(
-        "name: test\nduration_s: 1.0\ngravity_m_s2: {gravity:?}\nsand:\n  dx_m: {DX}\n  domain:\n    \
-         min_m: [0, 0, 0]\n    max_m: {max_m:?}\n  materials:\n    sand: {SAND}\n  bodies: {bodies}\n"
-    );
-    Scene::from_yaml(&text, Path::new("test.yaml"), &[])
-        .unwrap()
-        .build_solver()
-        .unwrap()
-}
-
-/// Advances sand and bodies together to `until_s`. The one dynamic body given with its mass
-/// (kg) is integrated here (semi-implicit Euler with the force the coupling set; translation
-/// only, no rapier contacts needed); the other bodies move at their velocity.
-fn run(
-    solver: &mut Solver,
-    coupling: &Coupling,
-    bodies: &mut RigidBodySet,
-    until_s: f64,
-    dynamic: Option<(RigidBodyHandle, f32)>,
-) {
-    while solver.time_s < until_s {
-        let dt = solver.next_dt().min(coupling.max_dt_s(bodies, DX));
-        coupling.substep(solver, bodies, dt).unwrap();
-        for (handle, rb) in bodies.iter_mut() {
-            if let Some((_, mass)) = dynamic.filter(|(h, _)| *h == handle) {
-                let a = rb.user_force() / mass;
-                rb.set_linvel(rb.linvel() + a * dt, true);
-            }
-            let moved = rb.translation() + rb.linvel() * dt;
-            rb.set_translation(moved, true);
-        }
-    }
-}
-
-/// A vertical plate 0.2 dx thick, pushed along +x at 0.2 m/s through a sand layer 2 cm deep.
-/// Returns (particles behind the plate at the end, particles the plate swept past).
-fn push_plate_through_layer(method: CouplingMethod) -> (usize, usize) {
-    let mut sand = solver(
-        [0.12, 0.03, 0.06],
-        [0.0, 0.0, -9.81],
-        "[{material: sand, box: {min_m: [0.04, 0, 0], max_m: [0.10, 0.03, 0.02]}}]",
-    );
-    let half_extents = [0.1 * DX, 0.02, 0.03];
-    let surface = match method {
-        CouplingMethod::Cpic => CpicSurface::thin_box(half_extents),
-        CouplingMethod::GridBoundary => CpicSurface::Solid(SharedShape::cuboid(
-            half_extents[0],
-            half_extents[1],
-            half_extents[2],
-        )),
-    };
-    let speed = 0.2;
-    let x0 = 0.03;
-    let mut bodies = RigidBodySet::new();
-    let plate = bodies.insert(
-        RigidBodyBuilder::kinematic_velocity_based()
-            .translation(Vec3::new(x0, 0.015, 0.02))
-            .linvel(Vec3::new(speed, 0.0, 0.0)),
-    );
-    let coupling = Coupling::new(
-        vec![collider("plate", plate, surface, CouplingMode::OneWay)],
-        &bodies,
-    )
-    .unwrap()
-    .with_method(method);
-    let start_x: Vec<f32> = sand.particles.position.iter().map(|x| x.x).collect();
-    let duration = 0.1;
-    run(&mut sand, &coupling, &mut bodies, duration, None);
-    let plate_x = bodies[plate].translation().x;
-    assert!((plate_x - (x0 + speed * duration as f32)).abs() < 0.01 * DX + speed * 2e-3);
-    let behind = sand
-        .particles
-        .position
-        .iter()
-        .filter(|x| x.x < plate_x)
-        .count();
-    // Particles start unsorted, in id order.
-    let swept = start_x.iter().filter(|&&x| x < plate_x).count();
-    (behind, swept)
-}
-
-fn collider(
-    name: &str,
-    body: RigidBodyHandle,
-    surface: CpicSurface,
-    mode: CouplingMode,
-) -> SandCollider {
-    SandCollider {
-        name: name.into(),
-        body,
-        body_to_surface: Pose::IDENTITY,
-        surface,
-        friction: 0.3,
-        mode,
-    }
-}
+mod sand_support;
+use sand_support::{collider, run, solver, DX};
 
 /// A free rigid box (two-way) thrown into a free blob of sand, no gravity: the momentum the box
 /// loses is the momentum the sand gains.
@@ -247,7 +143,9 @@ fn run_world(
     let (mut fastest, mut spin) = (0.0f32, 0.0f32);
     while sand.time_s < until_s {
         let dt = sand.next_dt().min(coupling.max_dt_s(&world.bodies, DX));
-        coupling.substep(sand, &mut world.bodies, dt).unwrap();
+        coupling
+            .substep(sand, &mut world.bodies, &world.multibody_joints, dt)
+            .unwrap();
         world.integration_parameters.dt = dt;
         world.step();
         if sand.time_s >= watch_from_s {
@@ -354,29 +252,5 @@ fn light_body_rests_on_sand_without_jitter() {
     assert!(
         (z - (depth + half[2])).abs() < 0.005,
         "the plate sank or flew: z = {z} m"
-    );
-}
-
-/// The thin plate keeps all sand in front of it with CPIC; the plain grid-boundary treatment,
-/// which imposes the plate's velocity only on grid nodes inside it, lets sand through, since a
-/// 1 mm plate almost never contains a node of a 5 mm grid.
-#[test]
-fn thin_plate_does_not_leak_with_cpic_but_does_with_grid_boundary() {
-    let (behind, swept) = push_plate_through_layer(CouplingMethod::Cpic);
-    println!("CPIC: {behind} of {swept} swept particles behind the plate");
-    assert!(
-        swept > 100,
-        "the plate must sweep into the layer ({swept} particles)"
-    );
-    assert_eq!(
-        behind, 0,
-        "CPIC: {behind} particles leaked behind the plate"
-    );
-    // Measured: 96 of 384 (the plate holds sand back only while a node plane lies inside it).
-    let (behind, swept) = push_plate_through_layer(CouplingMethod::GridBoundary);
-    println!("grid boundary: {behind} of {swept} swept particles behind the plate");
-    assert!(
-        behind > swept / 10,
-        "grid boundary: only {behind} of {swept} particles leaked (expected a leak)"
     );
 }

@@ -1,27 +1,16 @@
-//! Whole-solver behaviour: bouncing elastic cube, determinism, blow-up detection.
+//! Whole-solver behaviour: bouncing elastic cube, determinism. (Blow-up detection:
+//! `tests/stability.rs`.)
 
-use std::path::Path;
+use sandstep::mpm::Solver;
 
-use sandstep::mpm::{SimError, Solver};
-use sandstep::scene::Scene;
+mod sand_support;
+use sand_support::{box_solver, JELLY, SAND};
 
-/// A scene in a 16 cm box with slip walls; `material` and `bodies` are YAML snippets.
+/// A scene in a 16 cm box with slip walls under gravity; `material` and `bodies` are YAML
+/// snippets.
 fn scene(material: &str, bodies: &str, extra_solver: &str) -> Solver {
-    let text = format!(
-        "name: test\nduration_s: 1.0\nsand:\n  dx_m: 0.005\n  domain:\n    min_m: [0, 0, 0]\n    \
-         max_m: [0.16, 0.16, 0.16]\n  solver: {{{extra_solver}}}\n  materials:\n    m: {material}\n  \
-         bodies: {bodies}\n"
-    );
-    Scene::from_yaml(&text, Path::new("test.yaml"), &[])
-        .unwrap()
-        .build_solver()
-        .unwrap()
+    box_solver([0.0, 0.0, -9.81], extra_solver, material, bodies)
 }
-
-const JELLY: &str =
-    "{model: fixed_corotated, density_kg_m3: 1000, youngs_modulus_pa: 1.0e5, poisson_ratio: 0.3}";
-const SAND: &str = "{model: drucker_prager, density_kg_m3: 1600, youngs_modulus_pa: 3.5e5, \
-                    poisson_ratio: 0.3, friction_angle_deg: 35}";
 
 #[test]
 fn elastic_cube_bounces_and_keeps_its_volume() {
@@ -88,27 +77,4 @@ fn runs_are_bit_identical() {
     // The phase-ordered P2G makes the result independent of the thread count too.
     let c = positions_after(1, 300);
     assert!(a == c, "runs with 1 and 2 threads differ");
-}
-
-#[test]
-fn a_time_step_far_above_cfl_is_reported_as_a_blow_up() {
-    // The CFL step here is 0.4 * 0.005 / ~17 m/s = 1.2e-4 s; take 30 times that.
-    let mut s = scene(
-        SAND,
-        "[{material: m, box: {min_m: [0.04, 0.04, 0.0], max_m: [0.09, 0.08, 0.08]}}]",
-        "fixed_dt_s: 3.5e-3",
-    );
-    let err = s.advance_to(1.0).unwrap_err();
-    let SimError::BlowUp { step, particle, .. } = &err;
-    assert!(*step < 1000, "detected only at step {step}");
-    assert!((*particle as usize) < s.particles.len());
-    let message = err.to_string();
-    assert!(
-        message.contains("blew up at step") && message.contains("particle"),
-        "{message}"
-    );
-    // Nothing non-finite was left where an output could read it unchecked: the error names it.
-    // And the same scene with the adaptive step is stable over the same time.
-    let mut stable = sand_pile();
-    stable.advance_to(0.3).unwrap();
 }

@@ -5,6 +5,9 @@
 //! [0.5, 1.5) the weights are `0.5 (1.5 - fx)^2`, `0.75 - (fx - 1)^2`, `0.5 (fx - 0.5)^2`.
 //! They sum to one and have zero first moment, and `sum_i w_i (x_i - x_p)^2 = dx^2 / 4`, which
 //! is why the MLS/APIC inertia tensor inverse is the scalar `4 / dx^2`.
+//!
+//! [`Kernel::Linear`], the linear hat on the same window, exists to show what the B-spline
+//! avoids (cell-crossing noise, `docs/stability.md`).
 
 use nalgebra::Vector3;
 
@@ -28,9 +31,51 @@ pub struct Stencil {
     pub fx: Vector3<f32>,
     /// `weights[axis][n]`: weight of node `base + n` along `axis`.
     pub weights: [[f32; STENCIL]; 3],
+    /// Inverse of the MLS moment `D = sum_i w_i (x_i - x_p)(x_i - x_p)^T`, which is diagonal,
+    /// per axis in 1/cells^2: 4 for the quadratic B-spline, `1 / (f (1 - f))` for the linear hat.
+    pub inverse_moment: Vector3<f32>,
 }
 
+/// Interpolation kernel of the particle-grid transfers.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Kernel {
+    /// Quadratic B-spline (MLS-MPM's): C1, with the constant moment `D = dx^2/4`.
+    #[default]
+    QuadraticBspline,
+    /// Linear hat (tent), for comparison: its gradient jumps where a particle crosses a cell
+    /// boundary, where the moment `D = f (1 - f) dx^2` vanishes (with MLS transfers,
+    /// `w D^-1 (x_i - x_p)` is exactly the hat's gradient).
+    Linear,
+}
+
+/// Smallest `f (1 - f)` of the linear hat's moment (cells^2): a particle within 1e-4 cells of a
+/// node plane counts as that far (the products `w D^-1 (x_i - x_p)` stay within +-1 anyway).
+const MIN_LINEAR_MOMENT: f32 = 1e-4;
+
 impl Stencil {
+    /// The stencil of a particle at `xg` (grid units) for `kernel`.
+    #[inline(always)]
+    pub fn of(kernel: Kernel, xg: Vector3<f32>) -> Self {
+        match kernel {
+            Kernel::QuadraticBspline => Self::new(xg),
+            Kernel::Linear => Self::linear(xg),
+        }
+    }
+
+    /// The linear hat's weights on the quadratic stencil's 3-node window (`fx` in [0.5, 1.5)):
+    /// `1 - |fx - n|` on the two nodes around the particle, zero on the third.
+    pub fn linear(xg: Vector3<f32>) -> Self {
+        let mut stencil = Self::new(xg);
+        for axis in 0..3 {
+            let f = stencil.fx[axis];
+            stencil.weights[axis] = [0, 1, 2].map(|n| (1.0 - (f - n as f32).abs()).max(0.0));
+            let frac = f - f.floor();
+            stencil.inverse_moment[axis] = 1.0 / (frac * (1.0 - frac)).max(MIN_LINEAR_MOMENT);
+        }
+        stencil
+    }
+
     /// Stencil of a particle at `xg`, its position in grid units (cells from the grid origin).
     #[inline(always)]
     pub fn new(xg: Vector3<f32>) -> Self {
@@ -48,7 +93,12 @@ impl Stencil {
                 0.5 * (f - 0.5) * (f - 0.5),
             ];
         }
-        Stencil { base, fx, weights }
+        Stencil {
+            base,
+            fx,
+            weights,
+            inverse_moment: Vector3::repeat(4.0),
+        }
     }
 
     /// Weight of stencil node `(i, j, k)`, each in `0..3`.
@@ -119,6 +169,40 @@ mod tests {
             for axis in 0..3 {
                 assert!((0.5..1.5).contains(&s.fx[axis]));
                 assert!(s.weights[axis].iter().all(|&w| w >= 0.0));
+            }
+        }
+    }
+
+    /// The linear hat: weights sum to one with zero first moment, and `w D^-1 (x_i - x_p)`
+    /// along an axis is the hat's gradient, -1 and +1 (in 1/cells) on the two nodes around the
+    /// particle.
+    #[test]
+    fn linear_hat_weights_and_gradient() {
+        let mut rng = SmallRng::seed_from_u64(11);
+        for _ in 0..1000 {
+            let xg = Vector3::from_fn(|_, _| rng.random_range(-50.0..50.0f32));
+            let s = Stencil::linear(xg);
+            for axis in 0..3 {
+                let w = s.weights[axis];
+                let d = [0.0f32, 1.0, 2.0].map(|n| n - s.fx[axis]);
+                assert!((w.iter().sum::<f32>() - 1.0).abs() < 1e-5);
+                let first: f32 = w.iter().zip(&d).map(|(w, d)| w * d).sum();
+                assert!(first.abs() < 1e-5, "first moment {first}");
+                // Within MIN_LINEAR_MOMENT (about 1e-4 cells) of a node plane the moment is
+                // clamped and the gradient shrinks.
+                let frac = s.fx[axis] - s.fx[axis].floor();
+                if frac.min(1.0 - frac) < 2.0 * MIN_LINEAR_MOMENT {
+                    continue;
+                }
+                let gradient: Vec<f32> = w
+                    .iter()
+                    .zip(&d)
+                    .filter(|(&w, _)| w > 1e-3)
+                    .map(|(w, d)| w * d * s.inverse_moment[axis])
+                    .collect();
+                for g in &gradient {
+                    assert!((g.abs() - 1.0).abs() < 2e-2, "gradient {gradient:?} at {xg}");
+                }
             }
         }
     }

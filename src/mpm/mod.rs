@@ -15,4 +15,6 @@ pub mod svd;
 
 pub use boundary::{Wall, Walls};
 pub use particles::{NewParticle, Particles};
-pub use solver::{SimError, Solver, SolverMaterial, SolverSettings, StageTimes, TimeStep};
+pub use solver::{
+    SimError, Solver, SolverMaterial, SolverSettings, StageTimes, TimeStep, Transfer,
+};

@@ -14,7 +14,7 @@ use super::grid::{
     arena_slots, node_in_arena, ArenaSlot, Block, ParticleBlock, SparseGrid, ARENA_NODES,
     BLOCK_EDGE,
 };
-use super::kernel::Stencil;
+use super::kernel::{Kernel, Stencil};
 use super::material::Constitutive;
 use super::particles::{MaterialId, NewParticle, Particles, ReorderScratch};
 use super::simd::F4;
@@ -51,6 +51,19 @@ pub enum TimeStep {
     Fixed { dt_s: f32 },
 }
 
+/// How particle velocities reach the grid (physics.md section 1).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Transfer {
+    /// Affine particle-in-cell (Jiang et al. 2015), MLS-MPM's: each particle carries its local
+    /// velocity field `v + C (x - x_p)`, which keeps angular momentum.
+    #[default]
+    Apic,
+    /// Plain particle-in-cell: only `v` is transferred (C is still the velocity gradient that
+    /// updates F), which damps every rotation and shear of the velocity field. For comparison.
+    Pic,
+}
+
 /// Everything the solver needs besides particles and materials.
 #[derive(Clone, Debug)]
 pub struct SolverSettings {
@@ -67,6 +80,8 @@ pub struct SolverSettings {
     pub time_step: TimeStep,
     /// A particle faster than this (m/s) means the simulation has blown up.
     pub blowup_speed_m_s: f32,
+    pub transfer: Transfer,
+    pub kernel: Kernel,
 }
 
 /// Wall time spent in each stage of the substep, by name.
@@ -398,8 +413,10 @@ impl Solver {
     /// locks).
     fn particle_to_grid(&mut self, dt: f32, colliders: &[ColliderMotion]) -> Vec<ColliderImpulse> {
         let dx = self.settings.dx;
-        // Q_p = -dt V_p (4/dx^2) tau_p + m_p C_p, applied to offsets measured in cells.
-        let stress_scale = -dt * 4.0 / (dx * dx) * dx;
+        // Q_p = -dt V_p tau_p D^-1 + m_p C_p, applied to offsets measured in cells (D^-1 =
+        // 4/dx^2 for the quadratic B-spline).
+        let stress_scale = -dt / (dx * dx) * dx;
+        let kernel = self.settings.kernel;
         let particles = &self.particles;
         let colours = &self.colours;
         let grid_blocks = SharedBlocks::new(&mut self.grid.blocks);
@@ -417,10 +434,12 @@ impl Solver {
                     let mut block_impulses = Vec::new();
                     for p in pb.start..pb.end {
                         let x = particles.position[p];
-                        let s = Stencil::new(self.grid.to_grid(&x));
+                        let s = Stencil::of(kernel, self.grid.to_grid(&x));
                         let m = particles.mass[p];
                         let momentum = particles.velocity[p] * m;
-                        let q_cells = particles.stress[p] * (stress_scale * particles.volume[p])
+                        let q_cells = particles.stress[p]
+                            * Matrix3::from_diagonal(&s.inverse_moment)
+                            * (stress_scale * particles.volume[p])
                             + particles.affine[p] * (m * dx);
                         let base = local_base(&s, pb);
                         let tags = particles.cpic_tags[p];
@@ -531,6 +550,8 @@ impl Solver {
             lo: self.settings.domain_min,
             hi: self.settings.domain_max,
             blowup_speed_sq: self.settings.blowup_speed_m_s * self.settings.blowup_speed_m_s,
+            affine_transfer: self.settings.transfer == Transfer::Apic,
+            kernel: self.settings.kernel,
         };
         let blocks = &self.grid.particle_blocks;
         let views = G2pView::split(&mut self.particles, blocks);
@@ -573,6 +594,9 @@ struct G2pContext<'a> {
     hi: Vector3<f32>,
     /// Squared speed (m^2/s^2) above which a particle counts as blown up.
     blowup_speed_sq: f32,
+    /// Keep the affine matrix for the next P2G (APIC) or not (PIC).
+    affine_transfer: bool,
+    kernel: Kernel,
 }
 
 /// G2P of one particle block: loads its 6x6x6 arena of node velocities once, then per particle
@@ -591,6 +615,8 @@ fn grid_to_particle_block(cx: &G2pContext, view: G2pView, pb: &ParticleBlock) ->
         lo,
         hi,
         blowup_speed_sq: blowup_sq,
+        affine_transfer,
+        kernel,
     } = *cx;
     let mut arena = [F4::splat(0.0); ARENA_NODES];
     for (a, slot) in slots.iter().enumerate() {
@@ -611,7 +637,7 @@ fn grid_to_particle_block(cx: &G2pContext, view: G2pView, pb: &ParticleBlock) ->
         for lane in 0..lanes {
             let i = chunk + lane;
             let x = view.position[i];
-            let s = Stencil::new(grid.to_grid(&x));
+            let s = Stencil::of(kernel, grid.to_grid(&x));
             let base = local_base(&s, pb);
             let tags = view.cpic_tags[i];
             let near_collider = colour_arena.as_ref().filter(|_| tags != 0);
@@ -635,15 +661,15 @@ fn grid_to_particle_block(cx: &G2pContext, view: G2pView, pb: &ParticleBlock) ->
                 }
                 None => gather(&arena, &s, base),
             };
-            // C_p = (4/dx^2) sum w v_i (x_i - x_p)^T, with offsets in cells.
-            let c = b * (4.0 / dx);
+            // C_p = sum w v_i (x_i - x_p)^T D^-1, with offsets in cells.
+            let c = b * Matrix3::from_diagonal(&s.inverse_moment) / dx;
             f[lane] = view.deformation[i];
             step[lane] = c * dt;
             vc[lane] = view.volume_correction[i];
             frames[lane] = view.svd_frame[i];
             let mut x_new = x + v * dt;
             // Near a collider: plain PIC (no affine transfer) and the penalty push-back.
-            view.affine[i] = if near_collider.is_some() {
+            view.affine[i] = if near_collider.is_some() || !affine_transfer {
                 Matrix3::zeros()
             } else {
                 c
@@ -1081,6 +1107,8 @@ mod tests {
             gravity,
             time_step: TimeStep::Fixed { dt_s: 1e-4 },
             blowup_speed_m_s: 100.0,
+            transfer: Transfer::Apic,
+            kernel: Kernel::QuadraticBspline,
         }
     }
 

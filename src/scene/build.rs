@@ -267,6 +267,8 @@ impl Scene {
                 },
             },
             blowup_speed_m_s: s.blowup_speed_m_s,
+            transfer: s.transfer,
+            kernel: s.kernel,
         };
         let mut solver = Solver::new(settings, materials);
         for body in self.bodies() {

@@ -5,7 +5,8 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Deserializer};
 
-use crate::mpm::Wall;
+use crate::mpm::kernel::Kernel;
+use crate::mpm::{Transfer, Wall};
 
 /// A whole scene file.
 #[derive(Clone, Debug, Deserialize)]
@@ -171,6 +172,15 @@ pub struct SolverConfig {
     /// A particle faster than this (m/s) stops the run as a blow-up. Default 100.
     #[serde(default = "default_blowup_speed")]
     pub blowup_speed_m_s: f32,
+    /// Particle-grid transfer: `apic` (the default, MLS-MPM's affine transfer, which keeps
+    /// angular momentum) or `pic` (velocity only, dissipative; for comparison:
+    /// `docs/stability.md`).
+    #[serde(default)]
+    pub transfer: Transfer,
+    /// Interpolation kernel: `quadratic_bspline` (the default) or `linear` (the tent, whose
+    /// gradient jumps at cell boundaries; for comparison: `docs/stability.md`).
+    #[serde(default)]
+    pub kernel: Kernel,
 }
 
 fn default_cfl() -> f32 {
@@ -190,6 +200,8 @@ impl Default for SolverConfig {
             max_dt_s: default_max_dt(),
             fixed_dt_s: None,
             blowup_speed_m_s: default_blowup_speed(),
+            transfer: Transfer::default(),
+            kernel: Kernel::default(),
         }
     }
 }
