@@ -143,9 +143,7 @@ fn run_world(
     let (mut fastest, mut spin) = (0.0f32, 0.0f32);
     while sand.time_s < until_s {
         let dt = sand.next_dt().min(coupling.max_dt_s(&world.bodies, DX));
-        coupling
-            .substep(sand, &mut world.bodies, &world.multibody_joints, dt)
-            .unwrap();
+        coupling.substep(sand, &mut world.bodies, dt).unwrap();
         world.integration_parameters.dt = dt;
         world.step();
         if sand.time_s >= watch_from_s {

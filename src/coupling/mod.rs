@@ -12,16 +12,12 @@ pub mod plate;
 pub mod rft;
 pub mod surface;
 
-use nalgebra::{Matrix3, Matrix6, Vector3};
+use nalgebra::Vector3;
 use rapier3d::glamx::Vec3;
-use rapier3d::prelude::{
-    ColliderSet, MultibodyJointSet, Pose, RigidBody, RigidBodyHandle, RigidBodySet,
-};
+use rapier3d::prelude::{ColliderSet, Pose, RigidBodyHandle, RigidBodySet};
 use serde::{Deserialize, Serialize};
 
-use crate::mpm::cpic::{
-    free_body_mobility, ColliderImpulse, ColliderMotion, ColourBlock, NodeColour, MAX_COLLIDERS,
-};
+use crate::mpm::cpic::{ColliderImpulse, ColliderMotion, ColourBlock, NodeColour, MAX_COLLIDERS};
 use crate::mpm::grid::{node_in_block, BLOCK_EDGE};
 use crate::mpm::{SimError, Solver};
 pub use surface::{CpicSurface, SurfaceSample};
@@ -159,14 +155,12 @@ impl Coupling {
     /// One coupled sand substep of `dt` seconds against the bodies' current poses and
     /// velocities. Two-way bodies get the sand's impulse as a force and torque over `dt` (their
     /// previous user forces are replaced), so the caller must step rapier by the same `dt` next.
-    /// `multibodies` holds the articulations some bodies are links of (they yield to the sand
-    /// as links: [`ColliderMotion::mobility`]); empty if none. Returns the impulse each coupled collider received (N s, N m s about its body's centre of
+    /// Returns the impulse each coupled collider received (N s, N m s about its body's centre of
     /// mass), one-way colliders included.
     pub fn substep(
         &self,
         solver: &mut Solver,
         bodies: &mut RigidBodySet,
-        multibodies: &MultibodyJointSet,
         dt: f32,
     ) -> Result<Vec<ColliderImpulse>, SimError> {
         solver.begin_substep();
@@ -200,10 +194,14 @@ impl Coupling {
                     angular_rad_s: to_na(rb.angvel()),
                     centre_m: to_na(rb.center_of_mass()),
                     friction: c.friction,
-                    mobility: if yields {
-                        mobility(c.body, rb, multibodies)
+                    mass_kg: if yields { rb.mass() } else { f32::INFINITY },
+                    inertia_kg_m2: if yields {
+                        rb.mass_properties()
+                            .local_mprops
+                            .principal_inertia()
+                            .min_element()
                     } else {
-                        Matrix6::zeros()
+                        f32::INFINITY
                     },
                 }
             })
@@ -233,48 +231,6 @@ impl Coupling {
             rb.add_torque(to_force(j.angular_n_m_s), true);
         }
     }
-}
-
-/// How body `handle` (`rb`) yields to an impulse at its centre of mass
-/// ([`ColliderMotion::mobility`]): for a link of a multibody `J M^-1 J^T`, with rapier's link
-/// Jacobian (velocity of the link's centre of mass and angular velocity per generalized
-/// velocity) and the multibody's augmented mass matrix from its last step; otherwise, or before
-/// the multibody's first step, the free body's `diag(1/m, I^-1)`.
-fn mobility(
-    handle: RigidBodyHandle,
-    rb: &RigidBody,
-    multibodies: &MultibodyJointSet,
-) -> Matrix6<f32> {
-    if let Some(link) = multibodies.rigid_body_link(handle) {
-        if let Some(mb) = multibodies.get_multibody(link.multibody) {
-            let mass_matrix = mb.inv_augmented_mass();
-            let jacobian = mb.body_jacobian(link.id);
-            if mass_matrix.l().nrows() == jacobian.ncols() && jacobian.ncols() > 0 {
-                if let Some(solved) = mass_matrix.solve(&jacobian.transpose()) {
-                    let link_mobility: Matrix6<f32> = jacobian * solved;
-                    if link_mobility.iter().all(|m| m.is_finite()) {
-                        return link_mobility;
-                    }
-                }
-            }
-        }
-    }
-    let mprops = &rb.mass_properties().local_mprops;
-    let frame = rb.position().rotation * mprops.principal_inertia_local_frame;
-    let inverse_principal = mprops.inv_principal_inertia;
-    let inverse_inertia: Matrix3<f32> = [Vec3::X, Vec3::Y, Vec3::Z]
-        .into_iter()
-        .zip([
-            inverse_principal.x,
-            inverse_principal.y,
-            inverse_principal.z,
-        ])
-        .map(|(axis, inverse)| {
-            let axis = to_na(frame * axis);
-            axis * axis.transpose() * inverse
-        })
-        .sum();
-    free_body_mobility(rb.mass(), &inverse_inertia)
 }
 
 /// How the sand sees the colliders of one rapier body, each as `(pose in the body frame,

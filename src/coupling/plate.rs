@@ -4,7 +4,7 @@
 //! kinematically (one-way: the sand feels it, it records what it would feel).
 
 use rapier3d::glamx::Vec3;
-use rapier3d::prelude::{MultibodyJointSet, Pose, RigidBodyBuilder, RigidBodySet};
+use rapier3d::prelude::{Pose, RigidBodyBuilder, RigidBodySet};
 use serde::Serialize;
 
 use super::{Coupling, CouplingMode, CpicSurface, SandCollider};
@@ -65,7 +65,7 @@ pub fn press_plate(sand: &mut Solver, press: &PlatePress) -> Result<Vec<PlateSam
         let (mut impulse_n_s, mut elapsed_s) = (0.0f64, 0.0f64);
         while sand.time_s < window_end {
             let dt = sand.next_dt().min(coupling.max_dt_s(&bodies, dx));
-            let impulses = coupling.substep(sand, &mut bodies, &MultibodyJointSet::new(), dt)?;
+            let impulses = coupling.substep(sand, &mut bodies, dt)?;
             impulse_n_s += impulses[0].linear_n_s.z;
             elapsed_s += dt as f64;
             let rb = &mut bodies[plate];

@@ -201,7 +201,10 @@ mod tests {
                     .map(|(w, d)| w * d * s.inverse_moment[axis])
                     .collect();
                 for g in &gradient {
-                    assert!((g.abs() - 1.0).abs() < 2e-2, "gradient {gradient:?} at {xg}");
+                    assert!(
+                        (g.abs() - 1.0).abs() < 2e-2,
+                        "gradient {gradient:?} at {xg}"
+                    );
                 }
             }
         }

@@ -189,9 +189,7 @@ impl Simulation {
                         .next_dt()
                         .min(coupling.max_dt_s(&robot.world().bodies, dx))
                         .min(remaining);
-                    let world = robot.world_mut();
-                    let impulses =
-                        coupling.substep(solver, &mut world.bodies, &world.multibody_joints, dt)?;
+                    let impulses = coupling.substep(solver, &mut robot.world_mut().bodies, dt)?;
                     accumulate_leg_impulses(robot, coupling, &impulses, leg_impulses);
                     *impulse_time_s += dt as f64;
                     robot.step(dt);

@@ -5,9 +5,7 @@
 use std::path::Path;
 
 use rapier3d::glamx::Vec3;
-use rapier3d::prelude::{
-    MultibodyJointSet, Pose, RigidBodyBuilder, RigidBodyHandle, RigidBodySet, SharedShape,
-};
+use rapier3d::prelude::{Pose, RigidBodyBuilder, RigidBodyHandle, RigidBodySet, SharedShape};
 use sandstep::coupling::{Coupling, CouplingMethod, CouplingMode, CpicSurface, SandCollider};
 use sandstep::mpm::Solver;
 use sandstep::scene::Scene;
@@ -40,9 +38,7 @@ pub fn run(
 ) {
     while solver.time_s < until_s {
         let dt = solver.next_dt().min(coupling.max_dt_s(bodies, DX));
-        coupling
-            .substep(solver, bodies, &MultibodyJointSet::new(), dt)
-            .unwrap();
+        coupling.substep(solver, bodies, dt).unwrap();
         for (handle, rb) in bodies.iter_mut() {
             if let Some((_, mass)) = dynamic.filter(|(h, _)| *h == handle) {
                 let a = rb.user_force() / mass;
