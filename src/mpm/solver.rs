@@ -662,7 +662,7 @@ fn grid_to_particle_block(cx: &G2pContext, view: G2pView, pb: &ParticleBlock) ->
                 None => gather(&arena, &s, base),
             };
             // C_p = sum w v_i (x_i - x_p)^T D^-1, with offsets in cells.
-            let c = b * Matrix3::from_diagonal(&s.inverse_moment) / dx;
+            let c = b * Matrix3::from_diagonal(&(s.inverse_moment / dx));
             f[lane] = view.deformation[i];
             step[lane] = c * dt;
             vc[lane] = view.volume_correction[i];
