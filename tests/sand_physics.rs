@@ -16,7 +16,7 @@ fn scene(material: &str, bodies: &str, extra_solver: &str) -> Solver {
 fn elastic_cube_bounces_and_keeps_its_volume() {
     let mut s = scene(
         JELLY,
-        "[{material: m, box: {min_m: [0.06, 0.06, 0.05], max_m: [0.10, 0.10, 0.09]}}]",
+        "[{material: sand, box: {min_m: [0.06, 0.06, 0.05], max_m: [0.10, 0.10, 0.09]}}]",
         "",
     );
     let v0 = s.particles.total_volume();
@@ -46,7 +46,7 @@ fn elastic_cube_bounces_and_keeps_its_volume() {
 fn sand_pile() -> Solver {
     scene(
         SAND,
-        "[{material: m, box: {min_m: [0.04, 0.04, 0.0], max_m: [0.09, 0.08, 0.08]}}]",
+        "[{material: sand, box: {min_m: [0.04, 0.04, 0.0], max_m: [0.09, 0.08, 0.08]}}]",
         "",
     )
 }

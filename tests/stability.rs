@@ -1,17 +1,14 @@
 //! Stability where numerical methods are known to fail (`docs/stability.md`): each case runs the
 //! weak method beside the project's, and asserts both the failure and the success.
 
-use std::path::Path;
-
 use nalgebra::Vector3;
 use sandstep::coupling::CouplingMethod;
 use sandstep::mpm::{SimError, Solver};
-use sandstep::scene::Scene;
 
 mod sand_support;
-use sand_support::{box_solver as solver, push_plate_through_layer, JELLY, SAND};
+use sand_support::{box_solver as solver, push_plate_through_layer, sand_solver, JELLY, SAND};
 
-const PILE: &str = "[{material: m, box: {min_m: [0.04, 0.04, 0.0], max_m: [0.09, 0.08, 0.08]}}]";
+const PILE: &str = "[{material: sand, box: {min_m: [0.04, 0.04, 0.0], max_m: [0.09, 0.08, 0.08]}}]";
 
 /// Case 1. A thin leg-like plate (0.2 cells thick) swept through sand: the plain grid boundary
 /// imposes the plate's velocity only on nodes inside it, which a 1 mm plate almost never holds,
@@ -66,7 +63,7 @@ fn spinning_cube_keeps(transfer: &str) -> f64 {
         [0.0, 0.0, 0.0],
         &format!("transfer: {transfer}"),
         JELLY,
-        "[{material: m, box: {min_m: [0.06, 0.06, 0.06], max_m: [0.10, 0.10, 0.10]}}]",
+        "[{material: sand, box: {min_m: [0.06, 0.06, 0.06], max_m: [0.10, 0.10, 0.10]}}]",
     );
     let centre = s.particles.centre_of_mass().cast::<f32>();
     let spin = Vector3::new(0.0, 0.0, 10.0f32);
@@ -161,7 +158,7 @@ fn pull_push_cycles(volume_correction: bool, cycles: usize) -> Vec<f64> {
         [0.0, 0.0, 0.0],
         "",
         &sand,
-        "[{material: m, box: {min_m: [0.06, 0.06, 0.06], max_m: [0.10, 0.10, 0.10]}}]",
+        "[{material: sand, box: {min_m: [0.06, 0.06, 0.06], max_m: [0.10, 0.10, 0.10]}}]",
     );
     let r0 = rms_radius_m(&s);
     let centre = s.particles.centre_of_mass().cast::<f32>();
@@ -227,15 +224,13 @@ fn sand_pulled_apart_and_pushed_back_gains_volume_without_volume_correction_only
 fn settled_column_stress_spread(kernel: &str, until_s: f64) -> f64 {
     let soft_sand = "{model: drucker_prager, density_kg_m3: 1600, youngs_modulus_pa: 5.0e3, \
                      poisson_ratio: 0.3, friction_angle_deg: 35}";
-    let text = format!(
-        "name: column\nduration_s: 1.0\nsand:\n  dx_m: 0.005\n  domain:\n    min_m: [0, 0, 0]\n    \
-         max_m: [0.04, 0.04, 0.08]\n  solver: {{kernel: {kernel}}}\n  materials:\n    m: {soft_sand}\n  \
-         bodies: [{{material: m, box: {{min_m: [0, 0, 0], max_m: [0.04, 0.04, 0.06]}}}}]\n"
+    let mut s = sand_solver(
+        [0.04, 0.04, 0.08],
+        [0.0, 0.0, -9.81],
+        &format!("kernel: {kernel}"),
+        soft_sand,
+        "[{material: sand, box: {min_m: [0, 0, 0], max_m: [0.04, 0.04, 0.06]}}]",
     );
-    let mut s = Scene::from_yaml(&text, Path::new("column.yaml"), &[])
-        .unwrap()
-        .build_solver()
-        .unwrap();
     s.advance_to(until_s).unwrap();
     let p = &s.particles;
     let dx = s.grid().dx;

@@ -571,7 +571,7 @@ impl RftTerrain {
     ) -> Vec<BodyWrench> {
         let mut wrenches = Vec::with_capacity(self.bodies.len());
         // Per multibody: (link id, dt C + dt^2 K) of its links in the terrain.
-        let mut dampers: Vec<(MultibodyIndex, LinkImplicitTerms)> = Vec::new();
+        let mut implicit_terms: Vec<(MultibodyIndex, LinkImplicitTerms)> = Vec::new();
         for b in &self.bodies {
             let (wrench, implicit) = self.body_wrench(&bodies[b.body], b, dt_s);
             let rb = &mut bodies[b.body];
@@ -581,13 +581,16 @@ impl RftTerrain {
             rb.add_torque(to_vec3(wrench.torque_n_m), true);
             wrenches.push(wrench);
             if let Some(link) = multibodies.rigid_body_link(b.body) {
-                match dampers.iter_mut().find(|(m, _)| *m == link.multibody) {
+                match implicit_terms
+                    .iter_mut()
+                    .find(|(m, _)| *m == link.multibody)
+                {
                     Some((_, links)) => links.push((link.id, implicit)),
-                    None => dampers.push((link.multibody, vec![(link.id, implicit)])),
+                    None => implicit_terms.push((link.multibody, vec![(link.id, implicit)])),
                 }
             }
         }
-        for (index, links) in dampers {
+        for (index, links) in implicit_terms {
             let Some(mb) = multibodies.get_multibody_mut(index) else {
                 continue;
             };

@@ -437,10 +437,10 @@ impl Solver {
                         let s = Stencil::of(kernel, self.grid.to_grid(&x));
                         let m = particles.mass[p];
                         let momentum = particles.velocity[p] * m;
-                        let q_cells = particles.stress[p]
-                            * Matrix3::from_diagonal(&s.inverse_moment)
-                            * (stress_scale * particles.volume[p])
-                            + particles.affine[p] * (m * dx);
+                        let q_cells = scale_columns(
+                            &particles.stress[p],
+                            &(s.inverse_moment * stress_scale * particles.volume[p]),
+                        ) + particles.affine[p] * (m * dx);
                         let base = local_base(&s, pb);
                         let tags = particles.cpic_tags[p];
                         match &colour_arena {
@@ -578,6 +578,13 @@ impl Solver {
     }
 }
 
+/// `m diag(factors)`: column `j` of `m` times `factors[j]` (the kernel's `D^-1` on the right,
+/// without a matrix product per particle).
+#[inline(always)]
+fn scale_columns(m: &Matrix3<f32>, factors: &Vector3<f32>) -> Matrix3<f32> {
+    Matrix3::from_fn(|i, j| m[(i, j)] * factors[j])
+}
+
 /// What G2P reads besides the particles.
 struct G2pContext<'a> {
     grid: &'a SparseGrid,
@@ -662,7 +669,7 @@ fn grid_to_particle_block(cx: &G2pContext, view: G2pView, pb: &ParticleBlock) ->
                 None => gather(&arena, &s, base),
             };
             // C_p = sum w v_i (x_i - x_p)^T D^-1, with offsets in cells.
-            let c = b * Matrix3::from_diagonal(&(s.inverse_moment / dx));
+            let c = scale_columns(&b, &(s.inverse_moment / dx));
             f[lane] = view.deformation[i];
             step[lane] = c * dt;
             vc[lane] = view.volume_correction[i];

@@ -14,16 +14,29 @@ pub const DX: f32 = 0.005;
 pub const SAND: &str = "{model: drucker_prager, density_kg_m3: 1600, youngs_modulus_pa: 3.5e5, \
                     poisson_ratio: 0.3, friction_angle_deg: 35}";
 
-/// A solver from YAML snippets: domain max corner, gravity and sand bodies.
-pub fn solver(max_m: [f32; 3], gravity: [f32; 3], bodies: &str) -> Solver {
+/// A solver from YAML snippets: the domain's max corner (the min is the origin, walls slip),
+/// gravity, the `solver:` mapping's entries, the one material `sand` and the bodies.
+pub fn sand_solver(
+    max_m: [f32; 3],
+    gravity: [f32; 3],
+    solver: &str,
+    material: &str,
+    bodies: &str,
+) -> Solver {
     let text = format!(
         "name: test\nduration_s: 1.0\ngravity_m_s2: {gravity:?}\nsand:\n  dx_m: {DX}\n  domain:\n    \
-         min_m: [0, 0, 0]\n    max_m: {max_m:?}\n  materials:\n    sand: {SAND}\n  bodies: {bodies}\n"
+         min_m: [0, 0, 0]\n    max_m: {max_m:?}\n  solver: {{{solver}}}\n  materials:\n    \
+         sand: {material}\n  bodies: {bodies}\n"
     );
     Scene::from_yaml(&text, Path::new("test.yaml"), &[])
         .unwrap()
         .build_solver()
         .unwrap()
+}
+
+/// [`sand_solver`] with the default solver settings and [`SAND`].
+pub fn solver(max_m: [f32; 3], gravity: [f32; 3], bodies: &str) -> Solver {
+    sand_solver(max_m, gravity, "", SAND, bodies)
 }
 
 /// Advances sand and bodies together to `until_s`. The one dynamic body given with its mass
@@ -116,16 +129,7 @@ pub fn collider(
 pub const JELLY: &str =
     "{model: fixed_corotated, density_kg_m3: 1000, youngs_modulus_pa: 1.0e5, poisson_ratio: 0.3}";
 
-/// A solver in a 16 cm box with slip walls from YAML snippets: gravity, the `solver:` mapping's
-/// entries, one material and its bodies.
+/// [`sand_solver`] in a 16 cm box.
 pub fn box_solver(gravity: [f32; 3], solver: &str, material: &str, bodies: &str) -> Solver {
-    let text = format!(
-        "name: test\nduration_s: 1.0\ngravity_m_s2: {gravity:?}\nsand:\n  dx_m: 0.005\n  \
-         domain:\n    min_m: [0, 0, 0]\n    max_m: [0.16, 0.16, 0.16]\n  solver: {{{solver}}}\n  \
-         materials:\n    m: {material}\n  bodies: {bodies}\n"
-    );
-    Scene::from_yaml(&text, Path::new("test.yaml"), &[])
-        .unwrap()
-        .build_solver()
-        .unwrap()
+    sand_solver([0.16; 3], gravity, solver, material, bodies)
 }
