@@ -75,6 +75,7 @@ pub fn sand_block(particles: usize) -> Solver {
         blowup_speed_m_s: 100.0,
         transfer: Transfer::Apic,
         kernel: Kernel::QuadraticBspline,
+        sleep: None,
     };
     let mut solver = Solver::new(settings, vec![material]);
     let spacing = DX_M / PARTICLES_PER_EDGE as f32;

@@ -15,3 +15,4 @@ pub mod msgs;
 pub mod robot;
 pub mod ros;
 pub mod scene;
+pub mod sweep;

@@ -87,6 +87,23 @@ enum Command {
         #[arg(long, requires = "out")]
         resume: bool,
     },
+    /// Measure what each setting costs and buys: error against wall time, Pareto front.
+    Sweep {
+        /// Sweep file (YAML), e.g. config/sweeps/accuracy.yaml.
+        sweep: PathBuf,
+        /// Output folder (default out/sweeps/<name>-<YYYYmmdd-HHMMSS>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Run only this study (repeatable; default all).
+        #[arg(long = "study", value_name = "NAME")]
+        studies: Vec<String>,
+        /// Print results.json on stdout instead of the table.
+        #[arg(long)]
+        json: bool,
+    },
     /// Write a hexapod URDF (and its leg meshes) from leg and body parameters.
     Urdf(sandstep::robot::UrdfArgs),
     /// Summarise a recorded bag: distance, speed per gait cycle, sinkage, leg forces, commands.
@@ -344,6 +361,27 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 report.runs.len(),
                 report.out_dir
             );
+        }
+        Command::Sweep {
+            sweep,
+            out,
+            threads,
+            studies,
+            json,
+        } => {
+            set_threads(threads)?;
+            let sweep = sandstep::sweep::Sweep::load(&sweep)?.only_studies(&studies)?;
+            let opts = sandstep::sweep::SweepOptions {
+                out_dir: out,
+                progress: !json,
+                stop: Some(stop_flag()?),
+            };
+            let report = sandstep::sweep::run_sweep(&sweep, &opts)?;
+            if json {
+                println!("{}", serde_json::to_string(&report)?);
+            } else {
+                print!("{}", sandstep::sweep::report_table(&report));
+            }
         }
         Command::Urdf(args) => sandstep::robot::run_urdf_command(&args)?,
         Command::Analyze {

@@ -85,10 +85,12 @@ fn cyclone_dds_peer_reads_the_robot_and_reverses_it() {
             bag_arg,
         ],
     );
-    // The peer: 4 s reading the default gait, then 5 s commanding -2 Hz.
+    // The peer: 4 s reading the default gait, then 7 s commanding -2 Hz (the robot needs a
+    // second of sim time to turn its gait round, and on a loaded machine the node's sim time
+    // falls behind the peer's wall clock; 5 s was not always enough).
     let peer = Command::new(common::python())
         .arg(crate_dir().join("tests/python/dds_peer.py"))
-        .args(["4", "5", "-2.0"])
+        .args(["4", "7", "-2.0"])
         .env("ROS_DOMAIN_ID", domain.to_string())
         .env("CYCLONEDDS_URI", CYCLONE_LOOPBACK)
         .stdout(Stdio::piped())
@@ -99,7 +101,7 @@ fn cyclone_dds_peer_reads_the_robot_and_reverses_it() {
     let node = json_line(&wait_output(node, Duration::from_secs(60)), "sandstep node");
 
     let count = |t: &str| peer["counts"][t].as_u64().unwrap();
-    // 9 s at 100 Hz of sim time in real time; discovery eats the first few hundred ms.
+    // 11 s at 100 Hz of sim time in real time; discovery eats the first few hundred ms.
     for topic in ["clock", "joint_states", "odom"] {
         assert!(
             count(topic) > 500,

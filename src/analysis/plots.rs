@@ -35,7 +35,7 @@ const AXIS_PADDING: f64 = 0.05;
 /// Smallest span (in data units) of an axis, so a constant series still gets an axis.
 const MIN_AXIS_SPAN: f64 = 1e-3;
 /// Opacity of the legend background.
-const LEGEND_BACKGROUND_OPACITY: f64 = 0.85;
+pub(crate) const LEGEND_BACKGROUND_OPACITY: f64 = 0.85;
 /// The font family names plotters asks for, all served by the embedded font.
 const FONT_FAMILIES: [&str; 3] = ["sans-serif", "serif", "monospace"];
 /// Open Sans Regular (see `assets/fonts/README.md`).

@@ -19,6 +19,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::mpm::cpic::{ColliderImpulse, ColliderMotion, ColourBlock, NodeColour, MAX_COLLIDERS};
 use crate::mpm::grid::{node_in_block, BLOCK_EDGE};
+use crate::mpm::sleep::WakeZone;
 use crate::mpm::{SimError, Solver};
 pub use surface::{CpicSurface, SurfaceSample};
 
@@ -163,7 +164,6 @@ impl Coupling {
         bodies: &mut RigidBodySet,
         dt: f32,
     ) -> Result<Vec<ColliderImpulse>, SimError> {
-        solver.begin_substep();
         let dx = solver.grid().dx;
         let origin = solver.grid().origin;
         let band = BAND_CELLS * dx;
@@ -181,6 +181,8 @@ impl Coupling {
                 }
             })
             .collect();
+        let wake_zones: Vec<WakeZone> = placed.iter().map(|p| [p.min, p.max]).collect();
+        solver.begin_substep(&wake_zones);
         let method = self.method;
         solver.colour_nodes(|block| colour_block(block, &placed, method, origin, dx, band));
         let motions: Vec<ColliderMotion> = self

@@ -76,6 +76,18 @@ pub struct ExperimentConfig {
     pub robot_total_mass_kg: f64,
 }
 
+/// Checks that `name` can name an output folder or file: letters, digits, `_`, `-`, `.`
+/// (not first).
+pub fn check_output_name(name: &str) -> Result<(), String> {
+    let safe = |ch: char| ch.is_ascii_alphanumeric() || "_-.".contains(ch);
+    if name.is_empty() || !name.chars().all(safe) || name.starts_with('.') {
+        return Err(format!(
+            "'{name}' must be letters, digits, '_', '-' or '.' (not first)"
+        ));
+    }
+    Ok(())
+}
+
 /// Settling times within this many gait cycles above a whole number of cycles round down.
 const SETTLE_ROUNDING_TOLERANCE: f64 = 1e-9;
 
@@ -87,6 +99,29 @@ pub const LEAD_CYCLES: f64 = 0.25;
 /// cycle before them ([`LEAD_CYCLES`]), and a quarter after, as the legs may lag the gait. The
 /// window is `cycles + 1/2` cycles, a whole number of tripod steps.
 pub const WINDOW_EXTRA_CYCLES: f64 = 0.5;
+
+/// The measured stretch of a walking run: `cycles` whole gait cycles after settling, with a
+/// quarter cycle ([`LEAD_CYCLES`]) before them and one after ([`WINDOW_EXTRA_CYCLES`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GaitWindow {
+    /// Start of the measurement (s): a quarter cycle before the first leg cycle boundary at or
+    /// after the settling time (the gait's boundaries are at whole cycles), and not before 0.
+    pub from_s: f64,
+    /// End of the measurement and of the run (s): `from_s + (cycles + 1/2) / f`.
+    pub until_s: f64,
+}
+
+impl GaitWindow {
+    /// The window of `cycles` cycles at `frequency_hz` after `settle_s` of settling.
+    pub fn after_settling(settle_s: f64, cycles: u32, frequency_hz: f64) -> Self {
+        let whole_cycles = (settle_s * frequency_hz - SETTLE_ROUNDING_TOLERANCE).ceil();
+        let from_s = (whole_cycles - LEAD_CYCLES).max(0.0) / frequency_hz;
+        GaitWindow {
+            from_s,
+            until_s: from_s + (cycles as f64 + WINDOW_EXTRA_CYCLES) / frequency_hz,
+        }
+    }
+}
 
 fn default_base_scene() -> PathBuf {
     PathBuf::from("config/robot_on_sand.yaml")
@@ -164,21 +199,7 @@ impl Experiment {
     #[allow(clippy::neg_cmp_op_on_partial_ord)]
     pub fn validate(&self) -> Result<(), ExperimentError> {
         let c = &self.config;
-        if c.name.is_empty()
-            || !c
-                .name
-                .chars()
-                .all(|ch| ch.is_ascii_alphanumeric() || "_-.".contains(ch))
-            || c.name.starts_with('.')
-        {
-            return Err(self.invalid(
-                "name",
-                format!(
-                    "'{}' must be letters, digits, '_', '-' or '.' (not first)",
-                    c.name
-                ),
-            ));
-        }
+        check_output_name(&c.name).map_err(|message| self.invalid("name", message))?;
         let list = |field: &str, values: &[f64], check: &dyn Fn(f64) -> bool, range: &str| {
             if values.is_empty() {
                 return Err(self.invalid(field, "needs at least one value"));
@@ -282,15 +303,13 @@ impl Experiment {
     /// ([`LEAD_CYCLES`]) before the first leg cycle boundary at or after `settle_s` (the gait's
     /// boundaries are at whole cycles, leg angle a multiple of 2 pi), and not before 0.
     pub fn measure_from_s(&self, frequency_hz: f64) -> f64 {
-        let whole_cycles = (self.config.settle_s * frequency_hz - SETTLE_ROUNDING_TOLERANCE).ceil();
-        (whole_cycles - LEAD_CYCLES).max(0.0) / frequency_hz
+        GaitWindow::after_settling(self.config.settle_s, self.config.cycles, frequency_hz).from_s
     }
 
     /// Simulated time of a run at `frequency_hz` (s):
     /// `measure_from_s + (cycles + WINDOW_EXTRA_CYCLES) / f`.
     pub fn run_duration_s(&self, frequency_hz: f64) -> f64 {
-        self.measure_from_s(frequency_hz)
-            + (self.config.cycles as f64 + WINDOW_EXTRA_CYCLES) / frequency_hz
+        GaitWindow::after_settling(self.config.settle_s, self.config.cycles, frequency_hz).until_s
     }
 
     /// Every run of the sweep: by terrain model, then frequency, then curvature.

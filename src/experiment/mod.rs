@@ -14,20 +14,21 @@ pub mod results;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
-use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::{Deserialize, Serialize};
 
 pub use charts::{write_speed_chart, SPEED_CHART};
 pub use config::{
-    Experiment, ExperimentConfig, RunSpec, TerrainModel, LEAD_CYCLES, WINDOW_EXTRA_CYCLES,
+    Experiment, ExperimentConfig, GaitWindow, RunSpec, TerrainModel, LEAD_CYCLES,
+    WINDOW_EXTRA_CYCLES,
 };
 pub use results::{results_csv, write_results_csv, RunResult, CSV_COLUMNS, STATUS_OK};
 
 use crate::analysis::bag::{analyze_bag_with, AnalysisOptions};
 use crate::analysis::plots::PlotError;
 use crate::robot::RobotMetrics;
+use crate::scene::progress::RunsProgress;
 use crate::scene::{Observer, RunOptions, Scene, SceneError, Simulation};
 
 /// Parent of the default output folders.
@@ -196,7 +197,8 @@ pub fn run_experiment(
         std::fs::write(&json_path, json + "\n").map_err(write_error(&json_path))
     };
 
-    let progress = Progress::new(opts.progress, &runs);
+    let durations_s: Vec<f64> = runs.iter().map(|r| r.duration_s).collect();
+    let progress = RunsProgress::new(opts.progress, &durations_s);
     let wall = Instant::now();
     let stopped = || {
         opts.stop
@@ -206,7 +208,10 @@ pub fn run_experiment(
     for spec in &runs {
         let previous = kept.iter().position(|r| r.run == spec.name);
         let result = if let Some(i) = previous {
-            progress.skip(spec);
+            progress.skip(
+                spec.duration_s,
+                &format!("{}: kept from the earlier attempt", spec.name),
+            );
             kept.swap_remove(i)
         } else if stopped() {
             not_run(spec, "not run: the experiment was stopped")
@@ -216,9 +221,9 @@ pub fn run_experiment(
                 // A failed or interrupted run of the earlier attempt: run it again.
                 std::fs::remove_dir_all(&bag).map_err(write_error(&bag))?;
             }
-            progress.start(spec);
+            progress.start(&spec.name, spec.duration_s);
             let result = run_one(experiment, spec, &out, opts, &progress);
-            progress.finish(spec, &result);
+            progress.finish(spec.duration_s, &finish_line(spec, &result));
             result
         };
         report.failed += usize::from(!result.is_ok());
@@ -300,7 +305,7 @@ fn run_scene(experiment: &Experiment, spec: &RunSpec, urdf: &Path) -> Result<Sce
 
 /// Follows a run: the progress bar, the robot's mass and its latest metrics.
 struct RunWatch<'a> {
-    progress: &'a Progress,
+    progress: &'a RunsProgress,
     robot_mass_kg: Option<f64>,
     metrics: Option<RobotMetrics>,
     particles: usize,
@@ -326,7 +331,7 @@ fn run_one(
     spec: &RunSpec,
     out: &Path,
     opts: &ExperimentOptions,
-    progress: &Progress,
+    progress: &RunsProgress,
 ) -> RunResult {
     let cfg = &experiment.config;
     let urdf = urdf_path(out, spec.curvature_per_r);
@@ -409,102 +414,19 @@ fn run_one(
     result
 }
 
-/// Progress over the runs (in simulated time of all runs, so that the ETA weighs each run by
-/// its length) and within the current one.
-struct Progress {
-    multi: MultiProgress,
-    /// All runs' simulated time (ms).
-    runs: ProgressBar,
-    /// The current run's simulated time (ms).
-    run: ProgressBar,
-    run_count: usize,
-    /// Simulated time of the runs finished (s), and their number.
-    done_sim_s: std::cell::Cell<f64>,
-    done_runs: std::cell::Cell<usize>,
-}
-
-impl Progress {
-    fn new(visible: bool, runs: &[RunSpec]) -> Self {
-        let multi = MultiProgress::with_draw_target(if visible {
-            ProgressDrawTarget::stderr()
-        } else {
-            ProgressDrawTarget::hidden()
-        });
-        let total_sim_s: f64 = runs.iter().map(|r| r.duration_s).sum();
-        let overall = multi.add(ProgressBar::new((total_sim_s * 1e3) as u64));
-        overall.set_style(
-            ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {msg}, eta {eta}")
-                .expect("valid template")
-                .progress_chars("=> "),
-        );
-        let run = multi.add(ProgressBar::new(1));
-        run.set_style(
-            ProgressStyle::with_template("  {msg:24} [{bar:30}] {pos}/{len} ms sim")
-                .expect("valid template")
-                .progress_chars("=> "),
-        );
-        overall.enable_steady_tick(Duration::from_secs(1));
-        Progress {
-            multi,
-            runs: overall,
-            run,
-            run_count: runs.len(),
-            done_sim_s: std::cell::Cell::new(0.0),
-            done_runs: std::cell::Cell::new(0),
-        }
-    }
-
-    fn start(&self, spec: &RunSpec) {
-        self.run.set_length((spec.duration_s * 1e3) as u64);
-        self.run.set_position(0);
-        self.run.set_message(spec.name.clone());
-        self.runs.set_message(format!(
-            "run {} of {}",
-            self.done_runs.get() + 1,
-            self.run_count
-        ));
-    }
-
-    /// The current run has reached `time_s` of simulated time.
-    fn advance(&self, time_s: f64) {
-        self.run.set_position((time_s * 1e3) as u64);
-        self.runs
-            .set_position(((self.done_sim_s.get() + time_s) * 1e3) as u64);
-    }
-
-    /// A run kept from an earlier attempt (`--resume`): it leaves the total, so that the ETA
-    /// counts only what is simulated now.
-    fn skip(&self, spec: &RunSpec) {
-        let length = self.runs.length().unwrap_or(0);
-        self.runs
-            .set_length(length.saturating_sub((spec.duration_s * 1e3) as u64));
-        self.done_runs.set(self.done_runs.get() + 1);
-        let line = format!("{}: kept from the earlier attempt", spec.name);
-        self.multi.suspend(|| eprintln!("{line}"));
-    }
-
-    fn finish(&self, spec: &RunSpec, result: &RunResult) {
-        self.done_sim_s.set(self.done_sim_s.get() + spec.duration_s);
-        self.done_runs.set(self.done_runs.get() + 1);
-        self.runs.set_position((self.done_sim_s.get() * 1e3) as u64);
-        let line = if result.is_ok() {
-            format!(
-                "{}: {} m/s per cycle (std {}), tilt {} deg, {:.0} s wall",
-                spec.name,
-                fmt_opt(result.speed_per_cycle_mean_m_s, 4),
-                fmt_opt(result.speed_per_cycle_std_m_s, 4),
-                fmt_opt(result.max_tilt_deg, 0),
-                result.wall_time_s.unwrap_or(0.0)
-            )
-        } else {
-            format!("{} failed: {}", spec.name, result.status)
-        };
-        self.multi.suspend(|| eprintln!("{line}"));
-    }
-
-    fn clear(&self) {
-        self.run.finish_and_clear();
-        self.runs.finish_and_clear();
+/// The line printed when a run is over.
+fn finish_line(spec: &RunSpec, result: &RunResult) -> String {
+    if result.is_ok() {
+        format!(
+            "{}: {} m/s per cycle (std {}), tilt {} deg, {:.0} s wall",
+            spec.name,
+            fmt_opt(result.speed_per_cycle_mean_m_s, 4),
+            fmt_opt(result.speed_per_cycle_std_m_s, 4),
+            fmt_opt(result.max_tilt_deg, 0),
+            result.wall_time_s.unwrap_or(0.0)
+        )
+    } else {
+        format!("{} failed: {}", spec.name, result.status)
     }
 }
 

@@ -112,10 +112,15 @@ fn csv_cell(text: &str) -> String {
 
 /// The text of `results.csv`: a header of [`CSV_COLUMNS`] and one line per run.
 pub fn results_csv(runs: &[RunResult]) -> String {
-    let mut text = CSV_COLUMNS.join(",");
+    csv_table(&CSV_COLUMNS, runs.iter().map(|r| r.csv_cells().to_vec()))
+}
+
+/// A CSV table (RFC 4180): a header of `columns` and one line per row of cells.
+pub(crate) fn csv_table(columns: &[&str], rows: impl IntoIterator<Item = Vec<String>>) -> String {
+    let mut text = columns.join(",");
     text.push('\n');
-    for run in runs {
-        let cells: Vec<String> = run.csv_cells().iter().map(|c| csv_cell(c)).collect();
+    for row in rows {
+        let cells: Vec<String> = row.iter().map(|c| csv_cell(c)).collect();
         text.push_str(&cells.join(","));
         text.push('\n');
     }

@@ -52,22 +52,23 @@ impl Walls {
         }
     }
 
-    /// Applies the walls to the velocity `v` (m/s) of grid node `index`: node 0 lies on each min
-    /// wall and node `max_node[axis]` on each max wall; nodes on or beyond a wall get its rule.
+    /// Applies the walls to the velocity `v` (m/s) of grid node `index`: node `nodes[0][axis]`
+    /// lies on each min wall and `nodes[1][axis]` on each max wall; nodes on or beyond a wall
+    /// get its rule.
     #[inline]
     pub fn apply_at_node(
         &self,
         mut v: Vector3<f32>,
         index: [i32; 3],
-        max_node: [i32; 3],
+        nodes: &WallNodes,
     ) -> Vector3<f32> {
         for axis in 0..3 {
             let [min_wall, max_wall] = self.axis(axis);
             let mut normal = Vector3::zeros();
-            if index[axis] <= 0 {
+            if index[axis] <= nodes[0][axis] {
                 normal[axis] = 1.0;
                 v = min_wall.apply(v, normal);
-            } else if index[axis] >= max_node[axis] {
+            } else if index[axis] >= nodes[1][axis] {
                 normal[axis] = -1.0;
                 v = max_wall.apply(v, normal);
             }
@@ -84,6 +85,9 @@ impl Walls {
         }
     }
 }
+
+/// Grid node index of the min walls (`[0]`) and of the max walls (`[1]`), per axis.
+pub type WallNodes = [[i32; 3]; 2];
 
 /// Coulomb friction projection of a velocity `v` against a surface moving with `v_body`
 /// (physics.md section 4): a separating velocity is returned unchanged; otherwise the normal

@@ -93,10 +93,8 @@ pub struct SparseGrid {
     inv_dx: f32,
     /// World position of node (0, 0, 0) (m); the domain's min corner.
     pub origin: Vector3<f32>,
-    /// Smallest block coordinate the table covers, per axis.
-    table_min: [i32; 3],
-    /// Blocks per axis in the table.
-    table_dims: [i32; 3],
+    /// The blocks the table covers.
+    lattice: BlockLattice,
     /// Block lattice -> slot in `coords`/`blocks`, or `NO_BLOCK`.
     table: Vec<u32>,
     /// Coordinates of active blocks.
@@ -125,8 +123,10 @@ impl SparseGrid {
             dx,
             inv_dx: 1.0 / dx,
             origin: min,
-            table_min,
-            table_dims,
+            lattice: BlockLattice {
+                min: table_min,
+                dims: table_dims,
+            },
             table: vec![NO_BLOCK; cells],
             coords: Vec::new(),
             blocks: Vec::new(),
@@ -153,36 +153,25 @@ impl SparseGrid {
         let mut key = 0i64;
         for axis in 0..3 {
             let base = super::kernel::floor_i32(xg[axis] - 0.5);
-            let b = (base.div_euclid(BLOCK_EDGE) - self.table_min[axis])
-                .clamp(0, self.table_dims[axis] - 1);
-            key = key * self.table_dims[axis] as i64 + b as i64;
+            let b = (base.div_euclid(BLOCK_EDGE) - self.lattice.min[axis])
+                .clamp(0, self.lattice.dims[axis] - 1);
+            key = key * self.lattice.dims[axis] as i64 + b as i64;
         }
         key as u32
     }
 
-    fn coord_of_key(&self, key: u32) -> [i32; 3] {
-        let [_, ny, nz] = self.table_dims;
-        let k = key as i32;
-        [
-            k / (ny * nz) + self.table_min[0],
-            (k / nz) % ny + self.table_min[1],
-            k % nz + self.table_min[2],
-        ]
+    /// The block lattice the table covers (keys and coordinates).
+    pub fn lattice(&self) -> BlockLattice {
+        self.lattice
     }
 
     fn table_index(&self, c: [i32; 3]) -> usize {
-        let [_, ny, nz] = self.table_dims;
-        let l = [
-            c[0] - self.table_min[0],
-            c[1] - self.table_min[1],
-            c[2] - self.table_min[2],
-        ];
-        ((l[0] * ny + l[1]) * nz + l[2]) as usize
+        self.lattice.index(c)
     }
 
     /// Rebuilds the active blocks for particles sorted by `keys` (their [`Self::block_key`]),
-    /// and zeroes all node data.
-    pub fn rebuild(&mut self, keys: &[u32]) {
+    /// leaving out the runs whose key `skip` holds (sleeping sand), and zeroes all node data.
+    pub fn rebuild(&mut self, keys: &[u32], skip: impl Fn(u32) -> bool) {
         for c in std::mem::take(&mut self.coords) {
             let i = self.table_index(c);
             self.table[i] = NO_BLOCK;
@@ -195,7 +184,11 @@ impl SparseGrid {
             while end < keys.len() && keys[end] == key {
                 end += 1;
             }
-            let coord = self.coord_of_key(key);
+            if skip(key) {
+                start = end;
+                continue;
+            }
+            let coord = self.lattice.coord_of_key(key);
             let mut arena_blocks = [0u32; 8];
             for (slot, offset) in arena_blocks.iter_mut().enumerate() {
                 let c = [
@@ -231,12 +224,8 @@ impl SparseGrid {
     pub fn node(&self, index: [i32; 3]) -> Option<&Node> {
         let c = index.map(|i| i.div_euclid(BLOCK_EDGE));
         let l = index.map(|i| i.rem_euclid(BLOCK_EDGE) as usize);
-        if (0..3)
-            .any(|a| c[a] < self.table_min[a] || c[a] >= self.table_min[a] + self.table_dims[a])
-        {
-            return None;
-        }
-        let slot = self.table[self.table_index(c)];
+        let key = self.lattice.key_of_block(c)?;
+        let slot = self.table[key as usize];
         (slot != NO_BLOCK).then(|| &self.blocks[slot as usize][node_in_block(l[0], l[1], l[2])])
     }
 
@@ -254,4 +243,57 @@ impl SparseGrid {
 #[inline(always)]
 fn offset_bit(slot: usize, bit: usize) -> i32 {
     ((slot >> bit) & 1) as i32
+}
+
+/// The lattice of blocks a grid's table covers: block coordinates and their keys (x-major
+/// linear indices, the order particles are sorted in).
+#[derive(Clone, Copy, Debug)]
+pub struct BlockLattice {
+    /// Smallest block coordinate covered, per axis.
+    min: [i32; 3],
+    /// Blocks per axis.
+    dims: [i32; 3],
+}
+
+impl BlockLattice {
+    /// Blocks covered: keys run from 0 to this.
+    pub fn len(&self) -> usize {
+        self.dims.iter().map(|&d| d as usize).product()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    fn index(&self, c: [i32; 3]) -> usize {
+        let [_, ny, nz] = self.dims;
+        let l = [0, 1, 2].map(|a| c[a] - self.min[a]);
+        ((l[0] * ny + l[1]) * nz + l[2]) as usize
+    }
+
+    /// The block coordinate of `key`.
+    pub fn coord_of_key(&self, key: u32) -> [i32; 3] {
+        let [_, ny, nz] = self.dims;
+        let k = key as i32;
+        [
+            k / (ny * nz) + self.min[0],
+            (k / nz) % ny + self.min[1],
+            k % nz + self.min[2],
+        ]
+    }
+
+    /// The key of the block at coordinate `c`, if the lattice covers it.
+    #[inline]
+    pub fn key_of_block(&self, c: [i32; 3]) -> Option<u32> {
+        let inside = (0..3).all(|a| c[a] >= self.min[a] && c[a] < self.min[a] + self.dims[a]);
+        inside.then(|| self.index(c) as u32)
+    }
+
+    /// Keys of the up to 26 blocks around block `key` that the lattice covers.
+    pub fn neighbour_keys(&self, key: u32) -> impl Iterator<Item = u32> + '_ {
+        let [x, y, z] = self.coord_of_key(key);
+        (0..27).filter(|&o| o != 13).filter_map(move |o| {
+            self.key_of_block([x + o / 9 - 1, y + o / 3 % 3 - 1, z + o % 3 - 1])
+        })
+    }
 }

@@ -10,11 +10,13 @@ pub mod kernel;
 pub mod material;
 pub mod particles;
 pub mod simd;
+pub mod sleep;
 pub mod solver;
 pub mod svd;
 
 pub use boundary::{Wall, Walls};
 pub use particles::{NewParticle, Particles};
+pub use sleep::SleepSettings;
 pub use solver::{
     SimError, Solver, SolverMaterial, SolverSettings, StageTimes, TimeStep, Transfer,
 };

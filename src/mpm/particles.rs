@@ -38,6 +38,8 @@ pub struct Particles {
     /// Persistent particle id (creation order), so errors and outputs can name a particle
     /// although sorting moves it around.
     pub id: Vec<u32>,
+    /// The id of the next particle pushed (ids are not reused after [`Particles::retain`]).
+    next_id: u32,
 }
 
 /// Spare arrays for [`Particles::reorder`], one per element type (about 82 bytes per particle).
@@ -87,7 +89,8 @@ impl Particles {
 
     /// Appends an undeformed particle with zero stress and zero affine velocity.
     pub fn push(&mut self, p: NewParticle) {
-        let id = self.len() as u32;
+        let id = self.next_id;
+        self.next_id += 1;
         self.position.push(p.position);
         self.velocity.push(p.velocity);
         self.affine.push(Matrix3::zeros());
@@ -100,6 +103,33 @@ impl Particles {
         self.volume_correction.push(0.0);
         self.material.push(p.material);
         self.id.push(id);
+    }
+
+    /// Keeps the particles for which `keep(position)` holds, in their order; returns how many
+    /// were removed.
+    pub fn retain(&mut self, keep: impl Fn(&Vector3<f32>) -> bool) -> usize {
+        let mask: Vec<bool> = self.position.iter().map(keep).collect();
+        fn retain_by<T>(v: &mut Vec<T>, mask: &[bool]) {
+            let mut i = 0;
+            v.retain(|_| {
+                i += 1;
+                mask[i - 1]
+            });
+        }
+        let before = self.len();
+        retain_by(&mut self.position, &mask);
+        retain_by(&mut self.velocity, &mask);
+        retain_by(&mut self.affine, &mask);
+        retain_by(&mut self.deformation, &mask);
+        retain_by(&mut self.stress, &mask);
+        retain_by(&mut self.mass, &mask);
+        retain_by(&mut self.volume, &mask);
+        retain_by(&mut self.svd_frame, &mask);
+        retain_by(&mut self.cpic_tags, &mask);
+        retain_by(&mut self.volume_correction, &mask);
+        retain_by(&mut self.material, &mask);
+        retain_by(&mut self.id, &mask);
+        before - self.len()
     }
 
     /// Reorders every array by `order`: particle `i` of the result is particle `order[i]` now.

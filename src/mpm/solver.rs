@@ -5,7 +5,7 @@ use std::time::{Duration, Instant};
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
-use super::boundary::Walls;
+use super::boundary::{WallNodes, Walls};
 use super::cpic::{
     conflict_normal, conflicts, ghost_velocity, stencil_nodes, update_tags, wall_distance,
     ColliderImpulse, ColliderMotion, ColourBlock, NodeColour, PENALTY_MAX_CELLS, PENALTY_MIN_CELLS,
@@ -18,6 +18,7 @@ use super::kernel::{Kernel, Stencil};
 use super::material::Constitutive;
 use super::particles::{MaterialId, NewParticle, Particles, ReorderScratch};
 use super::simd::F4;
+use super::sleep::{Sleep, SleepChanges, SleepSettings, WakeZone};
 use super::svd::{Frame, COLD_START};
 
 /// Particles whose constitutive updates run together (the SVD's SIMD width).
@@ -82,6 +83,9 @@ pub struct SolverSettings {
     pub blowup_speed_m_s: f32,
     pub transfer: Transfer,
     pub kernel: Kernel,
+    /// Sleeping sand (blocks at rest left out of the substep), or none: every particle is
+    /// stepped every substep.
+    pub sleep: Option<SleepSettings>,
 }
 
 /// Wall time spent in each stage of the substep, by name.
@@ -99,13 +103,16 @@ pub struct StageTimes {
     pub g2p: Duration,
     /// CPIC: colouring the grid near colliders and updating particle tags.
     pub cpic: Duration,
+    /// Sleeping sand: waking and putting blocks to sleep.
+    pub sleep: Duration,
 }
 
 impl StageTimes {
     /// `(name, time)` of every stage, in substep order.
-    pub fn named(&self) -> [(&'static str, Duration); 6] {
+    pub fn named(&self) -> [(&'static str, Duration); 7] {
         [
             ("sort", self.sort),
+            ("sleep", self.sleep),
             ("grid_alloc", self.grid_alloc),
             ("cpic", self.cpic),
             ("p2g", self.p2g),
@@ -175,8 +182,11 @@ pub struct Solver {
     pub materials: Vec<SolverMaterial>,
     pub particles: Particles,
     grid: SparseGrid,
-    /// Grid node index on or beyond the max wall, per axis (the min wall is node 0).
-    wall_max_node: [i32; 3],
+    /// Grid node index of the min and the max walls, per axis: the domain's, or an x window
+    /// inside it ([`Solver::set_x_walls`]).
+    wall_nodes: WallNodes,
+    /// The box particles are clamped into (m): the domain, or the x window inside it.
+    bounds: [Vector3<f32>; 2],
     arena_slots: [ArenaSlot; ARENA_NODES],
     /// Block key of each particle, in particle order.
     keys: Vec<u32>,
@@ -190,6 +200,12 @@ pub struct Solver {
     colours: GridColours,
     /// Whether some particle carries CPIC tags (so they must be updated or cleared).
     tagged: bool,
+    /// Which blocks sleep (`settings.sleep`).
+    sleep: Option<Sleep>,
+    /// Block wakes and sleeps so far.
+    pub sleep_changes: SleepChanges,
+    /// Awake particles summed over the substeps taken (each particle stepped once a substep).
+    pub awake_particle_steps: u64,
     /// Largest particle speed after the last substep (m/s).
     max_speed_m_s: f32,
     /// Simulated time (s).
@@ -205,13 +221,19 @@ impl Solver {
         let extent = settings.domain_max - settings.domain_min;
         // Tolerate round-off when the extent is a whole number of cells.
         let wall_max_node = [0, 1, 2].map(|a| (extent[a] / settings.dx - 1e-3).ceil() as i32);
+        let bounds = [settings.domain_min, settings.domain_max];
+        let sleep = settings.sleep.map(|s| Sleep::new(s, grid.lattice().len()));
         Solver {
             settings,
             materials,
             particles: Particles::default(),
             grid,
-            wall_max_node,
+            wall_nodes: [[0; 3], wall_max_node],
+            bounds,
             arena_slots: arena_slots(),
+            sleep,
+            sleep_changes: SleepChanges::default(),
+            awake_particle_steps: 0,
             keys: Vec::new(),
             order: Vec::new(),
             reorder_scratch: ReorderScratch::default(),
@@ -231,6 +253,49 @@ impl Solver {
             self.max_speed_m_s = self.max_speed_m_s.max(p.velocity.norm());
             self.particles.push(p);
         }
+    }
+
+    /// Moves the x walls to the grid planes nearest `lo_m` and `hi_m` (m), within the domain:
+    /// the sand then keeps to that window of the domain (the scene's sand window follows the
+    /// robot this way). The walls keep their rules (`settings.walls.x_min`, `x_max`).
+    pub fn set_x_walls(&mut self, lo_m: f32, hi_m: f32) {
+        let (origin, dx) = (self.settings.domain_min.x, self.settings.dx);
+        let domain_max_node = ((self.settings.domain_max.x - origin) / dx - 1e-3).ceil() as i32;
+        let node = |x: f32| (((x - origin) / dx).round() as i32).clamp(0, domain_max_node);
+        let (lo, hi) = (node(lo_m), node(hi_m));
+        assert!(lo < hi, "x walls at {lo_m} and {hi_m} m leave no room");
+        self.wall_nodes[0][0] = lo;
+        self.wall_nodes[1][0] = hi;
+        self.bounds[0].x = origin + lo as f32 * dx;
+        self.bounds[1].x = (origin + hi as f32 * dx).min(self.settings.domain_max.x);
+    }
+
+    /// Where the x walls are (m): the domain's ends or the window of [`Solver::set_x_walls`].
+    pub fn x_walls_m(&self) -> [f32; 2] {
+        [self.bounds[0].x, self.bounds[1].x]
+    }
+
+    /// Removes the particles for which `keep(position)` is false; returns how many.
+    pub fn remove_particles(&mut self, keep: impl Fn(&Vector3<f32>) -> bool) -> usize {
+        self.particles.retain(keep)
+    }
+
+    /// Particles stepped in the current substep: all but the sleeping ones.
+    pub fn awake_particles(&self) -> usize {
+        match &self.sleep {
+            None => self.particles.len(),
+            Some(_) => self
+                .grid
+                .particle_blocks
+                .iter()
+                .map(|pb| pb.end - pb.start)
+                .sum(),
+        }
+    }
+
+    /// Blocks of sand asleep now (0 without `settings.sleep`).
+    pub fn asleep_blocks(&self) -> usize {
+        self.sleep.as_ref().map_or(0, Sleep::asleep_blocks)
     }
 
     /// The sparse grid (valid after a substep).
@@ -260,20 +325,36 @@ impl Solver {
 
     /// One substep of `dt` seconds, with no colliders.
     fn substep_by(&mut self, dt: f32) -> Result<f32, SimError> {
-        self.begin_substep();
+        self.begin_substep(&[]);
         self.finish_substep(dt, &[]).map(|_| dt)
     }
 
-    /// First half of a substep: sorts the particles and allocates the grid. A coupling may then
-    /// colour the grid near its colliders ([`Self::colour_nodes`]) before
-    /// [`Self::finish_substep`].
-    pub fn begin_substep(&mut self) {
+    /// First half of a substep: sorts the particles, wakes and puts to sleep blocks of sand
+    /// (with `settings.sleep`; sand near `wake_zones` stays awake) and allocates the grid for
+    /// the awake sand. A coupling may then colour the grid near its colliders
+    /// ([`Self::colour_nodes`]) before [`Self::finish_substep`].
+    pub fn begin_substep(&mut self, wake_zones: &[WakeZone]) {
         let t = Instant::now();
         self.sort_particles_by_block();
         self.stage_times.sort += t.elapsed();
 
         let t = Instant::now();
-        self.grid.rebuild(&self.keys);
+        if let Some(sleep) = &mut self.sleep {
+            let (velocity, affine) = (&mut self.particles.velocity, &mut self.particles.affine);
+            let changes = sleep.update(&self.grid, &self.keys, wake_zones, |run| {
+                velocity[run.clone()].fill(Vector3::zeros());
+                affine[run].fill(Matrix3::zeros());
+            });
+            self.sleep_changes.woken += changes.woken;
+            self.sleep_changes.fell_asleep += changes.fell_asleep;
+        }
+        self.stage_times.sleep += t.elapsed();
+
+        let t = Instant::now();
+        let sleep = &self.sleep;
+        self.grid.rebuild(&self.keys, |key| {
+            sleep.as_ref().is_some_and(|s| s.is_asleep(key))
+        });
         self.colours.clear(self.grid.blocks.len());
         self.stage_times.grid_alloc += t.elapsed();
     }
@@ -328,6 +409,7 @@ impl Solver {
 
         self.time_s += dt as f64;
         self.steps += 1;
+        self.awake_particle_steps += self.awake_particles() as u64;
         let mut impulses = add_impulses(result?, &p2g_impulses);
         impulses.resize(colliders.len(), ColliderImpulse::default());
         Ok(impulses)
@@ -494,10 +576,11 @@ impl Solver {
     fn update_grid(&mut self, dt: f32, colliders: &[ColliderMotion]) {
         let gravity = self.settings.gravity * dt;
         let walls = self.settings.walls;
-        let wall_max_node = self.wall_max_node;
+        let wall_nodes = self.wall_nodes;
         let coords = &self.grid.coords;
         let colours = &self.colours;
         let (origin, dx) = (self.grid.origin, self.grid.dx);
+        let (sleep, lattice) = (self.sleep.as_ref(), self.grid.lattice());
         self.grid
             .blocks
             .par_iter_mut()
@@ -505,9 +588,11 @@ impl Solver {
             .enumerate()
             .for_each(|(slot, (block, coord))| {
                 let first = coord.map(|c| c * BLOCK_EDGE);
-                let near_wall =
-                    (0..3).any(|a| first[a] <= 0 || first[a] + BLOCK_EDGE > wall_max_node[a]);
+                let near_wall = (0..3).any(|a| {
+                    first[a] <= wall_nodes[0][a] || first[a] + BLOCK_EDGE > wall_nodes[1][a]
+                });
                 let colour = colours.block(slot);
+                let near_sleep = sleep.filter(|s| s.near_grid_block(&lattice, *coord));
                 for (n, node) in block.iter_mut().enumerate() {
                     let mass = node[3];
                     if mass <= 0.0 {
@@ -519,11 +604,15 @@ impl Solver {
                         [0, 1, 2].map(|a| first[a] + local[a] as i32)
                     };
                     if near_wall {
-                        v = walls.apply_at_node(v, index(), wall_max_node);
+                        v = walls.apply_at_node(v, index(), &wall_nodes);
                     }
                     if let Some(imposed) = colour.map(|c| c[n].imposed).filter(|&i| i != 0) {
                         let x = origin + Vector3::from(index().map(|i| i as f32)) * dx;
                         v = colliders[imposed as usize - 1].velocity_at(&x);
+                    }
+                    // Sleeping sand holds the nodes it reaches at rest.
+                    if near_sleep.is_some_and(|s| s.holds_node(&lattice, index())) {
+                        v = Vector3::zeros();
                     }
                     node[0] = v.x;
                     node[1] = v.y;
@@ -547,19 +636,24 @@ impl Solver {
             materials: &self.materials,
             dt,
             dx: self.settings.dx,
-            lo: self.settings.domain_min,
-            hi: self.settings.domain_max,
+            lo: self.bounds[0],
+            hi: self.bounds[1],
             blowup_speed_sq: self.settings.blowup_speed_m_s * self.settings.blowup_speed_m_s,
             affine_transfer: self.settings.transfer == Transfer::Apic,
             kernel: self.settings.kernel,
         };
         let blocks = &self.grid.particle_blocks;
         let views = G2pView::split(&mut self.particles, blocks);
-        let summary = views
+        let summaries = views
             .into_par_iter()
             .zip(blocks.par_iter())
             .map(|(view, pb)| grid_to_particle_block(&context, view, pb))
-            .collect::<Vec<_>>()
+            .collect::<Vec<_>>();
+        if let Some(sleep) = &mut self.sleep {
+            let speeds: Vec<f32> = summaries.iter().map(|s| s.max_speed_sq.sqrt()).collect();
+            sleep.record_speeds(blocks, &self.keys, &speeds, dt);
+        }
+        let summary = summaries
             .into_iter()
             .fold(G2pSummary::default(), G2pSummary::merge);
         self.max_speed_m_s = summary.max_speed_sq.sqrt();
@@ -596,7 +690,7 @@ struct G2pContext<'a> {
     dt: f32,
     /// Grid spacing (m).
     dx: f32,
-    /// Domain box (m): particles are clamped into it.
+    /// The box particles are clamped into (m): the domain, or its x window.
     lo: Vector3<f32>,
     hi: Vector3<f32>,
     /// Squared speed (m^2/s^2) above which a particle counts as blown up.
@@ -1047,13 +1141,16 @@ impl<'a> G2pView<'a> {
     }
 }
 
-/// Splits `data` into the consecutive particle runs of `blocks`.
+/// Splits `data` into the particle runs of `blocks`, in order (the runs of sleeping blocks
+/// between them are left out).
 fn split_runs<'a, T>(mut data: &'a mut [T], blocks: &[ParticleBlock]) -> Vec<&'a mut [T]> {
+    let mut taken = 0;
     blocks
         .iter()
         .map(|pb| {
-            let (run, rest) = std::mem::take(&mut data).split_at_mut(pb.end - pb.start);
-            data = rest;
+            let (_, rest) = std::mem::take(&mut data).split_at_mut(pb.start - taken);
+            let (run, rest) = rest.split_at_mut(pb.end - pb.start);
+            (data, taken) = (rest, pb.end);
             run
         })
         .collect()
@@ -1116,6 +1213,7 @@ mod tests {
             blowup_speed_m_s: 100.0,
             transfer: Transfer::Apic,
             kernel: Kernel::QuadraticBspline,
+            sleep: None,
         }
     }
 
@@ -1173,7 +1271,7 @@ mod tests {
             s.particles.total_angular_momentum(DX),
         );
         s.sort_particles_by_block();
-        s.grid.rebuild(&s.keys);
+        s.grid.rebuild(&s.keys, |_| false);
         // Stress enters P2G but, being symmetric and summed against zero-mean offsets, adds no
         // net force or torque.
         s.particle_to_grid(1e-4, &[]);
@@ -1194,7 +1292,7 @@ mod tests {
             s.particles.stress[p] = Matrix3::zeros();
         }
         s.sort_particles_by_block();
-        s.grid.rebuild(&s.keys);
+        s.grid.rebuild(&s.keys, |_| false);
         s.particle_to_grid(0.0, &[]);
         s.update_grid(0.0, &[]);
         // After the grid update the nodes hold velocities; weight them by mass.
@@ -1248,7 +1346,7 @@ mod tests {
                 g[3] += w * m;
             }
         }
-        let wall_max = s.wall_max_node;
+        let wall_nodes = s.wall_nodes;
         for x in -1..(n[0] as i32 - 1) {
             for y in -1..(n[1] as i32 - 1) {
                 for z in -1..(n[2] as i32 - 1) {
@@ -1257,7 +1355,7 @@ mod tests {
                         continue;
                     }
                     let v = Vector3::new(g[0], g[1], g[2]) / g[3] + s.settings.gravity * dt;
-                    let v = s.settings.walls.apply_at_node(v, [x, y, z], wall_max);
+                    let v = s.settings.walls.apply_at_node(v, [x, y, z], &wall_nodes);
                     g[0] = v.x;
                     g[1] = v.y;
                     g[2] = v.z;
@@ -1311,7 +1409,7 @@ mod tests {
         }
         let mut dense = Solver::new(sparse.settings.clone(), sparse.materials.clone());
         dense.particles = sparse.particles.clone();
-        dense.wall_max_node = sparse.wall_max_node;
+        dense.wall_nodes = sparse.wall_nodes;
         for _ in 0..5 {
             sparse.substep().unwrap();
             dense_reference_step(&mut dense, 1e-4);

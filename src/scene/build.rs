@@ -5,7 +5,9 @@ use nalgebra::Vector3;
 use super::config::{BodyConfig, BoxShape, MaterialConfig, SandConfig};
 use super::{Scene, SceneError};
 use crate::mpm::material::{Constitutive, DruckerPrager, FixedCorotated, Lame};
-use crate::mpm::{NewParticle, Solver, SolverMaterial, SolverSettings, TimeStep, Walls};
+use crate::mpm::{
+    NewParticle, SleepSettings, Solver, SolverMaterial, SolverSettings, TimeStep, Walls,
+};
 
 /// Checks ranges and references; errors name the file and the field.
 // Negated comparisons (`!(a < b)`) on purpose: they reject NaN too.
@@ -46,6 +48,9 @@ pub fn validate(scene: &Scene) -> Result<(), SceneError> {
         };
     };
     positive("sand.dx_m", sand.dx_m as f64)?;
+    if let Some(window) = &sand.window {
+        super::sand_window::validate(scene, window, sand.dx_m)?;
+    }
     for axis in 0..3 {
         let (lo, hi) = (sand.domain.min_m[axis], sand.domain.max_m[axis]);
         if !(hi - lo >= 2.0 * sand.dx_m) {
@@ -73,6 +78,16 @@ pub fn validate(scene: &Scene) -> Result<(), SceneError> {
     positive("sand.solver.blowup_speed_m_s", s.blowup_speed_m_s as f64)?;
     if let Some(dt) = s.fixed_dt_s {
         positive("sand.solver.fixed_dt_s", dt as f64)?;
+    }
+    if let Some(sleep) = &s.sleep {
+        positive("sand.solver.sleep.speed_m_s", sleep.speed_m_s as f64)?;
+        positive("sand.solver.sleep.after_s", sleep.after_s as f64)?;
+        if !(sleep.wake_margin_m >= 0.0 && sleep.wake_margin_m.is_finite()) {
+            return Err(scene.invalid(
+                "sand.solver.sleep.wake_margin_m",
+                format!("{} must be a finite distance >= 0 (m)", sleep.wake_margin_m),
+            ));
+        }
     }
     for (name, m) in &sand.materials {
         let field = |f: &str| format!("sand.materials.{name}.{f}");
@@ -232,7 +247,6 @@ impl Scene {
     /// The MPM solver of the scene's sand, filled with its bodies' particles.
     pub fn build_solver(&self) -> Option<Solver> {
         let sand = self.sand()?;
-        let names: Vec<&String> = sand.materials.keys().collect();
         let materials = sand
             .materials
             .iter()
@@ -269,14 +283,37 @@ impl Scene {
             blowup_speed_m_s: s.blowup_speed_m_s,
             transfer: s.transfer,
             kernel: s.kernel,
+            sleep: s.sleep.map(|c| SleepSettings {
+                speed_m_s: c.speed_m_s,
+                after_s: c.after_s,
+                wake_margin_m: c.wake_margin_m,
+            }),
         };
         let mut solver = Solver::new(settings, materials);
+        solver.add_particles(self.sand_particles(None));
+        Some(solver)
+    }
+
+    /// The particles of the scene's sand bodies, or of their part with `x` in `x_range` (m):
+    /// the same lattice points either way, so slabs filled one after another adjoin exactly.
+    pub fn sand_particles(&self, x_range: Option<std::ops::Range<f32>>) -> Vec<NewParticle> {
+        let Some(sand) = self.sand() else {
+            return Vec::new();
+        };
+        let names: Vec<&String> = sand.materials.keys().collect();
+        let mut particles = Vec::new();
         for body in self.bodies() {
             let material = names.iter().position(|n| **n == body.material).unwrap() as u16;
             let density = sand.materials[&body.material].density_kg_m3();
-            solver.add_particles(fill_body(&body, sand.dx_m, density, material));
+            let filled = fill_body(&body, sand.dx_m, density, material);
+            match &x_range {
+                None => particles.extend(filled),
+                Some(r) => {
+                    particles.extend(filled.into_iter().filter(|p| r.contains(&p.position.x)))
+                }
+            }
         }
-        Some(solver)
+        particles
     }
 }
 

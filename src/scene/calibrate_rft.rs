@@ -108,6 +108,7 @@ pub fn calibrate_rft(scene: &Scene) -> Result<RftCalibration, CalibrationError> 
             ..sand.solver.clone()
         },
         materials: [(material.clone(), sand.materials[&material].clone())].into(),
+        window: None,
         bodies: vec![BodyConfig {
             material: material.clone(),
             box_shape: Some(BoxShape {

@@ -58,6 +58,10 @@ pub struct SandConfig {
     /// Sand bodies filled with particles at the start. Default: none.
     #[serde(default)]
     pub bodies: Vec<BodyConfig>,
+    /// Keep only the sand near the robot, the window following it (`docs/scenes.md`).
+    /// Default: none (all the sand, all the time).
+    #[serde(default)]
+    pub window: Option<super::sand_window::SandWindowConfig>,
 }
 
 /// The axis-aligned box particles never leave.
@@ -181,6 +185,37 @@ pub struct SolverConfig {
     /// gradient jumps at cell boundaries; for comparison: `docs/stability.md`).
     #[serde(default)]
     pub kernel: Kernel,
+    /// Sleeping sand: blocks at rest with no collider near are left out of the substep
+    /// (`docs/physics.md`, "Sleeping sand"). Default: none (every particle, every substep).
+    #[serde(default)]
+    pub sleep: Option<SleepConfig>,
+}
+
+/// `sand.solver.sleep`: when blocks of sand sleep and wake.
+#[derive(Clone, Copy, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SleepConfig {
+    /// A block is quiet while all its particles are slower than this (m/s), and a neighbour
+    /// at or above it wakes a sleeping block. Default 0.01.
+    #[serde(default = "default_sleep_speed")]
+    pub speed_m_s: f32,
+    /// Quiet time after which a block falls asleep (s). Default 0.05.
+    #[serde(default = "default_sleep_after")]
+    pub after_s: f32,
+    /// Sand within this distance (m) of a collider's bounding box stays or comes awake.
+    /// Default 0.02.
+    #[serde(default = "default_wake_margin")]
+    pub wake_margin_m: f32,
+}
+
+fn default_sleep_speed() -> f32 {
+    0.01
+}
+fn default_sleep_after() -> f32 {
+    0.05
+}
+fn default_wake_margin() -> f32 {
+    0.02
 }
 
 fn default_cfl() -> f32 {
@@ -202,6 +237,7 @@ impl Default for SolverConfig {
             blowup_speed_m_s: default_blowup_speed(),
             transfer: Transfer::default(),
             kernel: Kernel::default(),
+            sleep: None,
         }
     }
 }

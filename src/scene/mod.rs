@@ -1,12 +1,15 @@
 //! Scenes: YAML files in `config/`, loaded, checked and turned into a running simulation.
 
+pub mod bed;
 pub mod build;
 pub mod calibrate_rft;
 pub mod config;
 pub(crate) mod overrides;
 pub mod ply;
+pub mod progress;
 pub mod robot_sand;
 pub mod run;
+pub mod sand_window;
 pub mod simulation;
 pub mod terrain;
 

@@ -107,6 +107,9 @@ pub fn run_scene_observed(
 ) -> Result<RunSummary, RunError> {
     let config = &scene.config;
     let mut sim = Simulation::new(scene)?;
+    for line in sim.bed_shortfalls() {
+        eprintln!("warning: {}: sand bed: {line}", scene.file.display());
+    }
     let duration = opts.duration_s.unwrap_or(config.duration_s);
     let frame_interval = config.output.frame_interval_s;
     let frames = (duration / frame_interval).ceil().max(1.0) as u64;
@@ -204,8 +207,23 @@ pub fn run_scene_observed(
             metrics.insert("sand_mass_kg".into(), json!(solver.particles.total_mass()));
             metrics.insert("robot_mass_kg".into(), json!(robot.total_mass_kg()));
             metrics.insert("dx_m".into(), json!(solver.grid().dx));
+            metrics.insert("bed_shortfalls".into(), json!(sim.bed_shortfalls()));
+            if let Some(window) = sim.sand_window() {
+                metrics.insert("sand_window_m".into(), json!(window.x_m));
+                metrics.insert("sand_added".into(), json!(window.added));
+                metrics.insert("sand_dropped".into(), json!(window.dropped));
+            }
         } else {
             metrics.insert("total_mass_kg".into(), json!(solver.particles.total_mass()));
+        }
+        if solver.settings.sleep.is_some() {
+            let mean_awake = solver.awake_particle_steps as f64 / solver.steps.max(1) as f64;
+            metrics.insert("mean_awake_particles".into(), json!(mean_awake));
+            metrics.insert("blocks_woken".into(), json!(solver.sleep_changes.woken));
+            metrics.insert(
+                "blocks_fell_asleep".into(),
+                json!(solver.sleep_changes.fell_asleep),
+            );
         }
     }
     if let (Some(robot), Some(terrain)) = (sim.robot(), sim.rft_terrain()) {

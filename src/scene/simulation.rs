@@ -6,8 +6,10 @@
 use nalgebra::{UnitQuaternion, Vector3};
 use rapier3d::prelude::{RigidBody, RigidBodyHandle};
 
+use super::bed::BedRule;
 use super::robot_sand::{leg_sinkage_m, robot_coupling};
 use super::run::RunError;
+use super::sand_window::SandWindow;
 use super::terrain::{robot_rft_terrain, TerrainModel};
 use super::Scene;
 use crate::coupling::rft::{BodyWrench, RftTerrain};
@@ -65,6 +67,10 @@ enum Kind {
         coupling: Coupling,
         /// Height of the sand surface at the start (m).
         surface_z_m: f32,
+        /// The sand window following the robot (`sand.window`), if any.
+        window: Option<Box<SandWindow>>,
+        /// Where the bed falls short of the bed rule ([`BedRule`]) at the start.
+        bed_shortfalls: Vec<String>,
         /// Per leg, in [`LEGS`] order.
         leg_impulses: Vec<ImpulseSum>,
         /// Simulated time the impulses were summed over (s).
@@ -123,9 +129,16 @@ impl Simulation {
             (Some(robot_cfg), None) => Kind::RobotOnGround {
                 robot: Box::new(RobotSim::new(robot_cfg, config.gravity_m_s2)?),
             },
-            (Some(robot_cfg), Some(solver)) => {
+            (Some(robot_cfg), Some(mut solver)) => {
                 let robot = Box::new(RobotSim::new(robot_cfg, config.gravity_m_s2)?);
+                let window = scene
+                    .sand()
+                    .and_then(|s| s.window)
+                    .map(|w| Box::new(SandWindow::new(scene, w, &mut solver, robot_x_m(&robot))));
                 let coupling = robot_coupling(&robot, &config.coupling, solver.grid().dx)?;
+                let bed_shortfalls = scene.bed_box_m().map_or(Vec::new(), |bed| {
+                    BedRule::for_robot(&robot, bed[1][2]).shortfalls(bed)
+                });
                 let surface_z_m = solver
                     .particles
                     .position
@@ -137,6 +150,8 @@ impl Simulation {
                     robot,
                     coupling,
                     surface_z_m,
+                    window,
+                    bed_shortfalls,
                     leg_impulses: vec![ImpulseSum::default(); LEGS.len()],
                     impulse_time_s: 0.0,
                 }
@@ -180,8 +195,12 @@ impl Simulation {
                 coupling,
                 leg_impulses,
                 impulse_time_s,
+                window,
                 ..
             } => {
+                if let Some(window) = window {
+                    window.follow(solver, robot_x_m(robot));
+                }
                 let dx = solver.grid().dx;
                 while solver.time_s < target_s - 1e-12 {
                     let remaining = (target_s - solver.time_s) as f32;
@@ -259,6 +278,23 @@ impl Simulation {
         match &self.kind {
             Kind::Sand { solver } | Kind::RobotOnSand { solver, .. } => Some(solver),
             Kind::RobotOnGround { .. } | Kind::RobotOnRft { .. } => None,
+        }
+    }
+
+    /// Where the sand bed falls short of the bed rule for the robot (`src/scene/bed.rs`): one
+    /// line per side; empty if it meets it or the scene has no robot on sand.
+    pub fn bed_shortfalls(&self) -> &[String] {
+        match &self.kind {
+            Kind::RobotOnSand { bed_shortfalls, .. } => bed_shortfalls,
+            _ => &[],
+        }
+    }
+
+    /// The sand window following the robot (`sand.window`), if the scene has one.
+    pub fn sand_window(&self) -> Option<&SandWindow> {
+        match &self.kind {
+            Kind::RobotOnSand { window, .. } => window.as_deref(),
+            _ => None,
         }
     }
 
@@ -497,6 +533,11 @@ fn add_at_link_origin(
     );
     sum.linear_n_s += linear_n_s;
     sum.angular_n_m_s += angular_com_n_m_s + arm.cross(&linear_n_s);
+}
+
+/// The robot body's x position (m): what the sand window follows.
+fn robot_x_m(robot: &RobotSim) -> f32 {
+    robot.metrics().final_position_m[0] as f32
 }
 
 /// Stops a robot whose body has left the finite or plausible range.

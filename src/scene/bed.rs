@@ -1,0 +1,245 @@
+//! How much sand a robot needs: the bed rule (`docs/scenes.md`, "How big a bed").
+//!
+//! The rule is in units of the robot's leg *reach* r, the radius of the circle its farthest
+//! collision point sweeps about the hip (a leg turns full circles; for the shipped hexapod
+//! r = 4.3 cm, the 4.1 cm chord plus the leg's half width and thickness). Around the box the
+//! legs sweep at the start (every leg's circle, and the body), the bed needs
+//!
+//! - depth below the surface of at least [`DEPTH_PER_REACH`] r: the legs of the shipped robot
+//!   sink 3 to 5 mm walking and up to 25 mm when it digs in and turns over, and the sand
+//!   they load reaches about two leg widths below that;
+//! - at least [`SIDE_MARGIN_PER_REACH`] r of sand either side of the swept box;
+//! - at least [`END_MARGIN_PER_REACH`] r behind it and ahead of it (ahead, the robot's path
+//!   comes on top: a bed or a sand window must reach past where the robot goes).
+//!
+//! The factors are the smallest bed the check supports: `sandstep sweep
+//! config/sweeps/accuracy.yaml --study bed` and `tests/bed.rs` make the bed deeper, wider and
+//! longer and find the robot's speed unchanged within its noise.
+
+use rapier3d::glamx::Vec3;
+
+use crate::robot::RobotSim;
+
+/// Least depth of sand below the surface, per leg reach.
+pub const DEPTH_PER_REACH: f64 = 0.65;
+/// Least sand either side of the legs' swept box, per leg reach.
+pub const SIDE_MARGIN_PER_REACH: f64 = 1.0;
+/// Least sand behind and ahead of the legs' swept box at the start, per leg reach.
+pub const END_MARGIN_PER_REACH: f64 = 0.4;
+
+/// A box `[min, max]` that [`include`] grows from nothing.
+const EMPTY_BOX: [[f64; 3]; 2] = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
+
+/// Grows `bounds` to include the box `[lo, hi]`.
+fn include(bounds: &mut [[f64; 3]; 2], lo: [f64; 3], hi: [f64; 3]) {
+    for (a, (l, h)) in lo.iter().zip(hi).enumerate() {
+        bounds[0][a] = bounds[0][a].min(*l);
+        bounds[1][a] = bounds[1][a].max(h);
+    }
+}
+
+fn to_f64(v: Vec3) -> [f64; 3] {
+    [v.x as f64, v.y as f64, v.z as f64]
+}
+
+/// The rule applied to a robot at its start pose.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BedRule {
+    /// Leg reach r (m): largest distance from a hip to a point of its leg's colliders.
+    pub reach_m: f64,
+    /// The box the legs sweep at the start, with the body (m): min and max corners.
+    pub swept_m: [[f64; 3]; 2],
+    /// The least bed (m): min and max corners, the top at the sand surface.
+    pub required_m: [[f64; 3]; 2],
+}
+
+impl BedRule {
+    /// The rule for `robot` standing above a sand surface at `surface_z_m` (m).
+    pub fn for_robot(robot: &RobotSim, surface_z_m: f64) -> Self {
+        let world = robot.world();
+        let mut reach_m = 0.0f64;
+        let mut swept_m = EMPTY_BOX;
+        for &leg in &robot.leg_handles() {
+            let rb = &world.bodies[leg];
+            let hip_point = rb.translation();
+            let mut leg_y = [f64::INFINITY, f64::NEG_INFINITY];
+            for &c in rb.colliders() {
+                let collider = &world.colliders[c];
+                // World poses of colliders are synchronised only by a step: compose them here.
+                let pose =
+                    *rb.position() * collider.position_wrt_parent().copied().unwrap_or_default();
+                let aabb = collider.shape().compute_aabb(&pose);
+                leg_y = [
+                    leg_y[0].min(aabb.mins.y as f64),
+                    leg_y[1].max(aabb.maxs.y as f64),
+                ];
+                let corners = match collider.shape().as_cuboid() {
+                    Some(cuboid) => {
+                        let h = cuboid.half_extents;
+                        (0..8)
+                            .map(|k| {
+                                let local = Vec3::new(
+                                    if k & 4 != 0 { h.x } else { -h.x },
+                                    if k & 2 != 0 { h.y } else { -h.y },
+                                    if k & 1 != 0 { h.z } else { -h.z },
+                                );
+                                pose.transform_point(local)
+                            })
+                            .collect::<Vec<_>>()
+                    }
+                    // Other shapes: the corners of their bounding box (an upper bound).
+                    None => (0..8)
+                        .map(|k| {
+                            let pick =
+                                |bit: i32, lo: f32, hi: f32| if k & bit != 0 { hi } else { lo };
+                            Vec3::new(
+                                pick(4, aabb.mins.x, aabb.maxs.x),
+                                pick(2, aabb.mins.y, aabb.maxs.y),
+                                pick(1, aabb.mins.z, aabb.maxs.z),
+                            )
+                        })
+                        .collect(),
+                };
+                for p in corners {
+                    reach_m = reach_m.max((p - hip_point).length() as f64);
+                }
+            }
+            let hip = to_f64(hip_point);
+            include(
+                &mut swept_m,
+                [hip[0], leg_y[0], hip[2]],
+                [hip[0], leg_y[1], hip[2]],
+            );
+        }
+        // Each leg's circle about its hip, then the body.
+        let [lo, hi] = swept_m;
+        swept_m = [
+            [lo[0] - reach_m, lo[1], lo[2] - reach_m],
+            [hi[0] + reach_m, hi[1], hi[2] + reach_m],
+        ];
+        let body = &world.bodies[robot.body_handle()];
+        for &c in body.colliders() {
+            let collider = &world.colliders[c];
+            let pose =
+                *body.position() * collider.position_wrt_parent().copied().unwrap_or_default();
+            let aabb = collider.shape().compute_aabb(&pose);
+            include(&mut swept_m, to_f64(aabb.mins), to_f64(aabb.maxs));
+        }
+        let (end, side) = (
+            END_MARGIN_PER_REACH * reach_m,
+            SIDE_MARGIN_PER_REACH * reach_m,
+        );
+        let required_m = [
+            [
+                swept_m[0][0] - end,
+                swept_m[0][1] - side,
+                surface_z_m - DEPTH_PER_REACH * reach_m,
+            ],
+            [swept_m[1][0] + end, swept_m[1][1] + side, surface_z_m],
+        ];
+        BedRule {
+            reach_m,
+            swept_m,
+            required_m,
+        }
+    }
+
+    /// Where a bed `[min, max]` (m) falls short of the rule: one line per side, empty if it
+    /// meets it.
+    pub fn shortfalls(&self, bed_m: [[f64; 3]; 2]) -> Vec<String> {
+        let [need_lo, need_hi] = self.required_m;
+        let [lo, hi] = bed_m;
+        let r = self.reach_m;
+        let mut lines = Vec::new();
+        let mut short = |what: &str, by_m: f64, rule: String| {
+            // Round-off of f32 positions is no shortfall.
+            if by_m > 1e-4 {
+                lines.push(format!(
+                    "{what} {:.1} mm short of the bed rule ({rule})",
+                    by_m * 1e3
+                ));
+            }
+        };
+        let r_cm = r * 100.0;
+        short(
+            "depth",
+            lo[2] - need_lo[2],
+            format!("{DEPTH_PER_REACH} x reach {r_cm:.2} cm"),
+        );
+        for (name, by_m) in [
+            ("right side (-y)", lo[1] - need_lo[1]),
+            ("left side (+y)", need_hi[1] - hi[1]),
+        ] {
+            short(
+                name,
+                by_m,
+                format!("{SIDE_MARGIN_PER_REACH} x reach beyond the legs"),
+            );
+        }
+        for (name, by_m) in [
+            ("back (-x)", lo[0] - need_lo[0]),
+            ("front (+x)", need_hi[0] - hi[0]),
+        ] {
+            short(
+                name,
+                by_m,
+                format!("{END_MARGIN_PER_REACH} x reach beyond the legs"),
+            );
+        }
+        lines
+    }
+}
+
+impl crate::scene::Scene {
+    /// The bed: the box around the scene's box-shaped sand bodies (m), if it has any.
+    pub fn bed_box_m(&self) -> Option<[[f64; 3]; 2]> {
+        let mut bed = EMPTY_BOX;
+        for body in self.bodies() {
+            let b = body.box_shape?;
+            include(&mut bed, b.min_m.map(f64::from), b.max_m.map(f64::from));
+        }
+        bed[0][0].is_finite().then_some(bed)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use super::*;
+    use crate::scene::Scene;
+
+    fn rule_of(scene: &Scene) -> BedRule {
+        let robot = RobotSim::new(scene.config.robot.as_ref().unwrap(), [0.0, 0.0, -9.81]).unwrap();
+        BedRule::for_robot(&robot, 0.0)
+    }
+
+    #[test]
+    fn shipped_beds_meet_the_rule_and_a_shallow_one_does_not() {
+        let scene = Scene::load(Path::new("config/robot_on_sand.yaml"), &[]).unwrap();
+        let rule = rule_of(&scene);
+        // The hexapod's legs: 4.1 cm chord, 1 cm wide, 3 mm thick (docs/robot.md).
+        assert!(
+            (0.041..0.045).contains(&rule.reach_m),
+            "reach {} m",
+            rule.reach_m
+        );
+        let bed = scene.bed_box_m().unwrap();
+        println!("{rule:?}\nbed {bed:?}");
+        assert_eq!(rule.shortfalls(bed), Vec::<String>::new());
+        let track = Scene::load(Path::new("config/robot_on_track.yaml"), &[]).unwrap();
+        assert!(rule_of(&track)
+            .shortfalls(track.bed_box_m().unwrap())
+            .is_empty());
+
+        let shallow = [[bed[0][0], bed[0][1], -0.02], bed[1]];
+        let lines = rule.shortfalls(shallow);
+        assert_eq!(lines.len(), 1, "{lines:?}");
+        assert!(
+            lines[0].starts_with("depth") && lines[0].contains("reach"),
+            "{lines:?}"
+        );
+        let narrow = [[bed[0][0], -0.05, bed[0][2]], bed[1]];
+        assert!(rule.shortfalls(narrow)[0].starts_with("right side"));
+    }
+}

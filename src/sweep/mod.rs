@@ -1,0 +1,579 @@
+//! `sandstep sweep`: what each setting costs and what it buys (`docs/speed-vs-accuracy.md`).
+//!
+//! A sweep file lists studies: a base scene, a quantity of interest (the robot's mean speed,
+//! or the column collapse's runout) and settings (grid spacing, particles per cell, CFL number,
+//! Young's modulus, terrain model...). Each setting is run headless
+//! ([`crate::scene::run_scene_observed`]); its cost is the wall time per simulated second, its
+//! error the quantity's relative error against the study's reference run or the published law.
+//! Results go to `results.csv` and `results.json` (after every run, so a crash keeps what was
+//! done) and a chart per study of error against cost with the Pareto front marked. A setting
+//! that fails (e.g. blows up) is recorded and the others go on.
+
+pub mod chart;
+pub mod config;
+pub mod pareto;
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+
+pub use config::{Quantity, Setting, Sweep, SweepConfig};
+
+use crate::analysis::plots::PlotError;
+use crate::experiment::config::GaitWindow;
+use crate::experiment::results::csv_table;
+use crate::scene::progress::RunsProgress;
+use crate::scene::{run_scene_observed, Observer, RunOptions, Simulation};
+
+/// Parent of the default output folders.
+pub const DEFAULT_OUT_PARENT: &str = "out/sweeps";
+/// The results table.
+pub const RESULTS_CSV: &str = "results.csv";
+/// The results with the sweep's settings.
+pub const RESULTS_JSON: &str = "results.json";
+/// `status` of a setting that went through.
+pub const STATUS_OK: &str = "ok";
+/// Times within this much (s) of the window's start count as reaching it (frame times are
+/// sums of frame intervals).
+const WINDOW_TIME_TOLERANCE_S: f64 = 1e-9;
+
+/// The columns of `results.csv`, in order (`docs/speed-vs-accuracy.md`).
+pub const CSV_COLUMNS: [&str; 17] = [
+    "study",
+    "setting",
+    "quantity",
+    "value",
+    "value_std",
+    "starts",
+    "reference_value",
+    "relative_error",
+    "relative_error_noise",
+    "wall_time_per_sim_s",
+    "wall_time_s",
+    "sim_time_s",
+    "particles",
+    "substeps",
+    "pareto_optimal",
+    "status",
+    "overrides",
+];
+
+/// Why a sweep could not be run at all (a failing setting is not an error: it is recorded).
+#[derive(thiserror::Error, Debug)]
+pub enum SweepError {
+    #[error("cannot read sweep file {}: {source}", file.display())]
+    Read {
+        file: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{}: {message}", file.display())]
+    Parse { file: PathBuf, message: String },
+    #[error("{}: {field}: {message}", file.display())]
+    Invalid {
+        file: PathBuf,
+        field: String,
+        message: String,
+    },
+    #[error("cannot write {}: {source}", path.display())]
+    Write {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("drawing a chart: {0}")]
+    Plot(#[from] PlotError),
+}
+
+/// How to run a sweep.
+#[derive(Clone, Debug, Default)]
+pub struct SweepOptions {
+    /// Output folder; default `out/sweeps/<name>-<YYYYmmdd-HHMMSS>`.
+    pub out_dir: Option<PathBuf>,
+    /// Show progress bars (over the settings, and the current run's simulated time) on stderr.
+    pub progress: bool,
+    /// Set (e.g. by a Ctrl-C handler) to stop the current run after its frame and skip the
+    /// rest; everything so far is written.
+    pub stop: Option<Arc<AtomicBool>>,
+}
+
+/// What one setting cost and measured: a row of `results.csv`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct SettingResult {
+    /// The study's name.
+    pub study: String,
+    /// `reference`, `baseline`, `<axis name>=<value>` or a named setting.
+    pub setting: String,
+    /// `robot_speed` or `collapse_runout`.
+    pub quantity: String,
+    /// The measured quantity: mean speed along x (m/s) or normalized runout (-); the mean over
+    /// the starts.
+    pub value: Option<f64>,
+    /// Standard deviation of the value over the starts (sample, N - 1); None for one start.
+    pub value_std: Option<f64>,
+    /// Runs made (starts of the robot), each measured.
+    pub starts: usize,
+    /// What it is held against: the reference run's speed or the published runout.
+    pub reference_value: Option<f64>,
+    /// `|value - reference_value| / |reference_value|` (0 for the reference run itself).
+    pub relative_error: Option<f64>,
+    /// One standard error of `relative_error` from the spread over the starts (setting's and
+    /// reference's): errors below about twice this are not resolved. None for one start.
+    pub relative_error_noise: Option<f64>,
+    /// Wall time per simulated second (s/s): the cost.
+    pub wall_time_per_sim_s: Option<f64>,
+    /// Wall time of the simulation (s).
+    pub wall_time_s: Option<f64>,
+    /// Simulated time (s).
+    pub sim_time_s: Option<f64>,
+    /// Sand particles (0 without MPM sand).
+    pub particles: Option<usize>,
+    /// Simulation steps (MPM substeps, or robot steps without sand).
+    pub substeps: Option<u64>,
+    /// On the study's Pareto front of (cost, error), the reference excluded.
+    pub pareto_optimal: bool,
+    /// `ok`, or why the run failed.
+    pub status: String,
+    /// The setting's changes to the base scene (the study's own overrides not repeated).
+    pub overrides: Vec<String>,
+    /// Whether this is the study's reference run.
+    pub is_reference: bool,
+    /// The run's scene-specific measurements (`sandstep run --json`'s `metrics`).
+    pub metrics: serde_json::Map<String, serde_json::Value>,
+}
+
+impl SettingResult {
+    /// Whether the run went through.
+    pub fn is_ok(&self) -> bool {
+        self.status == STATUS_OK
+    }
+
+    /// The CSV cells of this row, in [`CSV_COLUMNS`] order.
+    fn csv_cells(&self) -> Vec<String> {
+        let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v}"));
+        vec![
+            self.study.clone(),
+            self.setting.clone(),
+            self.quantity.clone(),
+            opt(self.value),
+            opt(self.value_std),
+            self.starts.to_string(),
+            opt(self.reference_value),
+            opt(self.relative_error),
+            opt(self.relative_error_noise),
+            opt(self.wall_time_per_sim_s),
+            opt(self.wall_time_s),
+            opt(self.sim_time_s),
+            self.particles.map_or(String::new(), |n| n.to_string()),
+            self.substeps.map_or(String::new(), |n| n.to_string()),
+            self.pareto_optimal.to_string(),
+            self.status.clone(),
+            self.overrides.join(" "),
+        ]
+    }
+}
+
+/// The text of `results.csv`.
+pub fn results_csv(results: &[SettingResult]) -> String {
+    csv_table(&CSV_COLUMNS, results.iter().map(SettingResult::csv_cells))
+}
+
+/// What a sweep did: `results.json`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct SweepReport {
+    /// The sweep's name.
+    pub sweep: String,
+    /// The sweep file.
+    pub file: String,
+    /// Its settings, defaults filled in.
+    pub config: SweepConfig,
+    /// The output folder.
+    pub out_dir: String,
+    /// Local start time, `YYYY-mm-dd HH:MM:SS`.
+    pub started: String,
+    /// Worker threads of the simulations.
+    pub threads: usize,
+    /// One per setting, in the order run.
+    pub results: Vec<SettingResult>,
+    /// Settings whose status is not `ok`.
+    pub failed: usize,
+    /// Wall time of the whole sweep (s).
+    pub wall_time_s: f64,
+    /// Files written: results and charts.
+    pub files: Vec<String>,
+}
+
+/// `out/sweeps/<name>-<YYYYmmdd-HHMMSS>`, with `-2`, `-3`, ... if taken.
+pub fn default_out_dir(name: &str) -> PathBuf {
+    crate::ros::default_bag_dir(Path::new(DEFAULT_OUT_PARENT), name)
+}
+
+/// Fills in each row's reference value (the reference run's, for `robot_speed`), relative
+/// error and Pareto flag, study by study.
+pub fn score(results: &mut [SettingResult]) {
+    let studies: Vec<String> = results.iter().map(|r| r.study.clone()).collect();
+    for study in studies
+        .iter()
+        .enumerate()
+        .filter(|(i, s)| !studies[..*i].contains(s))
+        .map(|(_, s)| s)
+    {
+        let reference_row = results
+            .iter()
+            .find(|r| &r.study == study && r.is_reference && r.is_ok());
+        let reference = reference_row.and_then(|r| r.value);
+        let reference_sq_error = reference_row.and_then(standard_error).map(|e| e * e);
+        let rows: Vec<usize> = (0..results.len())
+            .filter(|&i| &results[i].study == study)
+            .collect();
+        for &i in &rows {
+            let row = &mut results[i];
+            if row.quantity == Quantity::RobotSpeed.name() {
+                row.reference_value = reference;
+            }
+            row.relative_error = match (row.is_ok(), row.value, row.reference_value) {
+                (true, Some(v), Some(r)) if r != 0.0 => Some((v - r).abs() / r.abs()),
+                _ => None,
+            };
+            row.relative_error_noise = match (row.relative_error, reference, reference_sq_error) {
+                (Some(_), Some(r), Some(r_sq)) if !row.is_reference => {
+                    standard_error(row).map(|e| (e * e + r_sq).sqrt() / r.abs())
+                }
+                _ => None,
+            };
+        }
+        let candidates: Vec<usize> = rows
+            .into_iter()
+            .filter(|&i| !results[i].is_reference)
+            .collect();
+        let points: Vec<(f64, f64)> = candidates
+            .iter()
+            .map(|&i| {
+                let r = &results[i];
+                (
+                    r.wall_time_per_sim_s
+                        .filter(|_| r.is_ok())
+                        .unwrap_or(f64::NAN),
+                    r.relative_error.unwrap_or(f64::NAN),
+                )
+            })
+            .collect();
+        for (&i, optimal) in candidates.iter().zip(pareto::pareto_optimal(&points)) {
+            results[i].pareto_optimal = optimal;
+        }
+    }
+}
+
+/// The standard error of a row's mean value over its starts, if it has several.
+fn standard_error(row: &SettingResult) -> Option<f64> {
+    row.value_std.map(|s| s / (row.starts as f64).sqrt())
+}
+
+/// Runs every setting of `sweep`, writing `results.csv`, `results.json` (after every run) and
+/// a chart per study into the output folder.
+pub fn run_sweep(sweep: &Sweep, opts: &SweepOptions) -> Result<SweepReport, SweepError> {
+    let cfg = &sweep.config;
+    let out = opts
+        .out_dir
+        .clone()
+        .unwrap_or_else(|| default_out_dir(&cfg.name));
+    let write_error = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| SweepError::Write { path, source }
+    };
+    std::fs::create_dir_all(&out).map_err(write_error(&out))?;
+    let csv_path = out.join(RESULTS_CSV);
+    let json_path = out.join(RESULTS_JSON);
+    let mut report = SweepReport {
+        sweep: cfg.name.clone(),
+        file: sweep.file.display().to_string(),
+        config: cfg.clone(),
+        out_dir: out.display().to_string(),
+        started: chrono::Local::now().format("%Y-%m-%d %H:%M:%S").to_string(),
+        threads: rayon::current_num_threads(),
+        results: Vec::with_capacity(sweep.settings.len()),
+        failed: 0,
+        wall_time_s: 0.0,
+        files: Vec::new(),
+    };
+    let write_results = |report: &SweepReport| -> Result<(), SweepError> {
+        std::fs::write(&csv_path, results_csv(&report.results)).map_err(write_error(&csv_path))?;
+        let json = serde_json::to_string_pretty(report).expect("plain data");
+        std::fs::write(&json_path, json + "\n").map_err(write_error(&json_path))
+    };
+
+    let durations_s: Vec<f64> = sweep
+        .settings
+        .iter()
+        .map(|s| s.duration_s * s.runs() as f64)
+        .collect();
+    let progress = RunsProgress::new(opts.progress, &durations_s);
+    let wall = Instant::now();
+    for (index, setting) in sweep.settings.iter().enumerate() {
+        let study = &cfg.studies[setting.study];
+        let label = format!("{}/{}", study.name, setting.name);
+        let stopped = opts
+            .stop
+            .as_ref()
+            .is_some_and(|s| s.load(Ordering::Relaxed));
+        let result = if stopped {
+            SettingResult {
+                status: "not run: the sweep was stopped".into(),
+                ..blank_result(sweep, setting)
+            }
+        } else {
+            progress.start(&label, setting.duration_s * setting.runs() as f64);
+            let ply_dir = out.join("ply").join(format!("{index:03}"));
+            run_setting(sweep, setting, ply_dir, opts, &progress)
+        };
+        report.failed += usize::from(!result.is_ok());
+        report.results.push(result);
+        score(&mut report.results);
+        if !stopped {
+            let scored = report.results.last().expect("just pushed");
+            progress.finish(
+                setting.duration_s * setting.runs() as f64,
+                &finish_line(&label, scored),
+            );
+        }
+        report.wall_time_s = wall.elapsed().as_secs_f64();
+        write_results(&report)?;
+    }
+    progress.clear();
+
+    let mut files = vec![csv_path.clone(), json_path.clone()];
+    for study in &cfg.studies {
+        if !report.results.iter().any(|r| r.study == study.name) {
+            continue;
+        }
+        let note = match study.quantity {
+            Quantity::RobotSpeed => format!(
+                "reference {}",
+                study.reference.as_deref().unwrap_or_default().join(" ")
+            ),
+            Quantity::CollapseRunout => "reference: the published law".into(),
+        };
+        let note = format!("{note}; {} threads", report.threads);
+        files.extend(chart::write_pareto_chart(
+            &report.results,
+            &study.name,
+            study.quantity.error_label(),
+            &note,
+            &out,
+        )?);
+    }
+    report.files = files.iter().map(|p| p.display().to_string()).collect();
+    report.wall_time_s = wall.elapsed().as_secs_f64();
+    write_results(&report)?;
+    Ok(report)
+}
+
+/// A row for `setting` with nothing measured yet.
+fn blank_result(sweep: &Sweep, setting: &Setting) -> SettingResult {
+    let study = &sweep.config.studies[setting.study];
+    SettingResult {
+        study: study.name.clone(),
+        setting: setting.name.clone(),
+        quantity: study.quantity.name().into(),
+        overrides: setting.overrides.clone(),
+        is_reference: setting.is_reference,
+        status: STATUS_OK.into(),
+        ..SettingResult::default()
+    }
+}
+
+/// Follows a run: the progress bar, and the robot's x position at the window's start and at
+/// the latest frame.
+struct Measure<'a> {
+    progress: &'a RunsProgress,
+    /// Simulated time of the setting's earlier starts (s), for the progress bar.
+    progress_offset_s: f64,
+    window: Option<GaitWindow>,
+    /// (time s, body x m) at the first frame at or after the window's start.
+    start: Option<(f64, f64)>,
+    /// (time s, body x m) at the latest frame.
+    latest: Option<(f64, f64)>,
+}
+
+impl Observer for Measure<'_> {
+    fn observe(&mut self, sim: &mut Simulation) -> Result<(), String> {
+        let time_s = sim.time_s();
+        self.progress.advance(self.progress_offset_s + time_s);
+        if let (Some(window), Some(robot)) = (self.window, sim.robot()) {
+            let x = robot.metrics().final_position_m[0];
+            if self.start.is_none() && time_s >= window.from_s - WINDOW_TIME_TOLERANCE_S {
+                self.start = Some((time_s, x));
+            }
+            self.latest = Some((time_s, x));
+        }
+        Ok(())
+    }
+}
+
+impl Measure<'_> {
+    /// Mean speed along x from the window's start to the latest frame (m/s).
+    fn mean_speed_m_s(&self) -> Option<f64> {
+        let ((t0, x0), (t1, x1)) = (self.start?, self.latest?);
+        (t1 > t0).then(|| (x1 - x0) / (t1 - t0))
+    }
+}
+
+/// Mean and sample standard deviation (None for fewer than two values).
+fn mean_and_std(values: &[f64]) -> (f64, Option<f64>) {
+    let n = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    let std = (values.len() > 1)
+        .then(|| (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt());
+    (mean, std)
+}
+
+/// Runs and measures one setting, once per start; failures become its status.
+fn run_setting(
+    sweep: &Sweep,
+    setting: &Setting,
+    ply_dir: PathBuf,
+    opts: &SweepOptions,
+    progress: &RunsProgress,
+) -> SettingResult {
+    let mut result = blank_result(sweep, setting);
+    let (mut wall_time_s, mut sim_time_s, mut substeps) = (0.0, 0.0, 0);
+    let mut values = Vec::new();
+    for run in 0..setting.runs() {
+        let scene = match sweep.scene_of_run(setting, Some(run)) {
+            Ok(scene) => scene,
+            Err(e) => {
+                result.status = e.to_string();
+                return result;
+            }
+        };
+        let run_opts = RunOptions {
+            duration_s: Some(setting.duration_s),
+            out_dir: Some(ply_dir.join(format!("start{run}"))),
+            progress: false,
+            stop: opts.stop.clone(),
+        };
+        let mut measure = Measure {
+            progress,
+            progress_offset_s: run as f64 * setting.duration_s,
+            window: setting.window,
+            start: None,
+            latest: None,
+        };
+        let summary = match run_scene_observed(&scene, &run_opts, &mut measure) {
+            Ok(summary) => summary,
+            Err(e) => {
+                result.status = if setting.runs() > 1 {
+                    format!("start {run} (x = {} m): {e}", setting.start_x_m[run])
+                } else {
+                    e.to_string()
+                };
+                return result;
+            }
+        };
+        wall_time_s += summary.wall_time_s;
+        sim_time_s += summary.sim_time_s;
+        substeps += summary.steps;
+        result.starts = run + 1;
+        result.wall_time_s = Some(wall_time_s);
+        result.sim_time_s = Some(sim_time_s);
+        result.wall_time_per_sim_s = Some(wall_time_s / sim_time_s);
+        result.particles = Some(summary.particles);
+        result.substeps = Some(substeps);
+        if run == 0 {
+            result.metrics = summary.metrics.clone();
+        }
+        if summary.stopped_early {
+            result.status = format!(
+                "stopped at t = {:.3} s of {} s",
+                summary.sim_time_s, setting.duration_s
+            );
+            return result;
+        }
+        let metric = |name: &str| summary.metrics.get(name).and_then(|v| v.as_f64());
+        let value = match sweep.config.studies[setting.study].quantity {
+            Quantity::RobotSpeed => measure.mean_speed_m_s(),
+            Quantity::CollapseRunout => {
+                result.reference_value = metric("lube_2005_normalized_runout");
+                metric("normalized_runout")
+            }
+        };
+        match value {
+            Some(v) => values.push(v),
+            None => {
+                result.status = "the run did not measure its quantity".into();
+                return result;
+            }
+        }
+    }
+    let (mean, std) = mean_and_std(&values);
+    result.value = Some(mean);
+    result.value_std = std;
+    result
+}
+
+/// The line printed when a setting's run is over.
+fn finish_line(label: &str, r: &SettingResult) -> String {
+    if r.is_ok() {
+        format!(
+            "{label}: {} (error {}), {} s per simulated s",
+            fmt_opt(r.value, 4),
+            error_text(r),
+            fmt_opt(r.wall_time_per_sim_s, 2),
+        )
+    } else {
+        format!("{label} failed: {}", r.status)
+    }
+}
+
+/// The relative error in percent, with its noise where there is one: `12.3 ± 4.5 %`.
+fn error_text(r: &SettingResult) -> String {
+    match (r.relative_error, r.relative_error_noise) {
+        (Some(e), Some(n)) => format!("{:.1} ± {:.1} %", 100.0 * e, 100.0 * n),
+        (Some(e), None) => format!("{:.1} %", 100.0 * e),
+        _ => "-".into(),
+    }
+}
+
+/// `v` with `decimals`, or `-`.
+fn fmt_opt(v: Option<f64>, decimals: usize) -> String {
+    v.map_or("-".into(), |v| format!("{v:.decimals$}"))
+}
+
+/// The human summary of a report: one line per setting, `*` on the Pareto front.
+pub fn report_table(report: &SweepReport) -> String {
+    let mut text = format!(
+        "{}: {} settings, {} failed, {:.0} s wall; results in {}\n",
+        report.sweep,
+        report.results.len(),
+        report.failed,
+        report.wall_time_s,
+        report.out_dir
+    );
+    text.push_str(&format!(
+        "{:<16} {:<40} {:>10} {:>10} {:>14} {:>10} {:>9}  status\n",
+        "study", "setting", "value", "reference", "error", "wall/sim s", "particles"
+    ));
+    for r in &report.results {
+        let name = format!(
+            "{}{}",
+            if r.pareto_optimal { "* " } else { "  " },
+            r.setting
+        );
+        text.push_str(&format!(
+            "{:<16} {:<40} {:>10} {:>10} {:>14} {:>10} {:>9}  {}\n",
+            r.study,
+            name,
+            fmt_opt(r.value, 4),
+            fmt_opt(r.reference_value, 4),
+            error_text(r),
+            fmt_opt(r.wall_time_per_sim_s, 2),
+            r.particles.map_or("-".into(), |n| n.to_string()),
+            r.status
+        ));
+    }
+    text.push_str(
+        "* on the study's Pareto front (no other setting is both cheaper and more accurate)\n",
+    );
+    text
+}
