@@ -9,6 +9,9 @@ use std::process::Command;
 
 use serde_json::Value;
 
+mod sweep_support;
+use sweep_support::{num, run_sweep};
+
 /// The columns `docs/speed-vs-accuracy.md` documents for `results.csv`.
 const CSV_COLUMNS: [&str; 17] = [
     "study",
@@ -62,40 +65,19 @@ studies:
         values: [0.001, 0.004]
 "#;
 
-fn row<'a>(results: &'a [Value], study: &str, setting: &str) -> &'a Value {
-    results
-        .iter()
-        .find(|r| r["study"] == study && r["setting"] == setting)
-        .unwrap_or_else(|| panic!("no row {study}/{setting}"))
-}
-
 #[test]
 fn sweep_measures_cost_and_error_marks_the_pareto_front_and_records_failures() {
-    let dir = tempfile::tempdir().unwrap();
-    let file = dir.path().join("small.yaml");
-    std::fs::write(&file, SWEEP).unwrap();
-    let out = dir.path().join("out");
-    let output = Command::new(env!("CARGO_BIN_EXE_sandstep"))
-        .args([
-            "sweep",
-            file.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--json",
-        ])
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(output.status.success(), "{stderr}");
-    let report: Value = serde_json::from_slice(&output.stdout).unwrap();
-    let results = report["results"].as_array().unwrap();
+    let sweep = run_sweep(SWEEP);
+    let (report, out) = (&sweep.report, &sweep.out);
+    let results = sweep.results();
+    let row = |study: &str, setting: &str| sweep.row(study, setting);
     assert_eq!(results.len(), 7, "{results:#?}");
     assert_eq!(report["failed"], 1);
 
     // The collapse converges towards the law as the grid is refined, at a price.
-    let fine = row(results, "collapse", "baseline");
-    let coarse = row(results, "collapse", "dx_m=0.008");
-    let f = |v: &Value, key: &str| v[key].as_f64().unwrap_or_else(|| panic!("{key} in {v}"));
+    let fine = row("collapse", "baseline");
+    let coarse = row("collapse", "dx_m=0.008");
+    let f = num;
     for r in [fine, coarse] {
         assert_eq!(r["status"], "ok", "{r}");
         // The aspect ratio is an f32 in the scene.
@@ -114,13 +96,13 @@ fn sweep_measures_cost_and_error_marks_the_pareto_front_and_records_failures() {
     assert!(f(fine, "wall_time_per_sim_s") > f(coarse, "wall_time_per_sim_s"));
     assert!(f(fine, "particles") > f(coarse, "particles"));
     // A fixed step far beyond the CFL limit blows up: recorded, and the sweep went on.
-    let blown = row(results, "collapse", "beyond_cfl");
+    let blown = row("collapse", "beyond_cfl");
     let status = blown["status"].as_str().unwrap();
     assert!(status.contains("blew up"), "{status}");
     assert!(blown["relative_error"].is_null() && blown["pareto_optimal"] == false);
 
     // RFT: errors against the reference run, which has none.
-    let reference = row(results, "robot_rft", "reference");
+    let reference = row("robot_rft", "reference");
     assert_eq!(f(reference, "relative_error"), 0.0);
     assert_eq!(
         reference["pareto_optimal"], false,
@@ -132,7 +114,7 @@ fn sweep_measures_cost_and_error_marks_the_pareto_front_and_records_failures() {
         "the robot walks forward: {reference}"
     );
     for setting in ["baseline", "max_dt_s=0.001", "max_dt_s=0.004"] {
-        let r = row(results, "robot_rft", setting);
+        let r = row("robot_rft", setting);
         assert_eq!(f(r, "reference_value"), reference_speed);
         assert!(f(r, "relative_error") < RFT_STEP_ERROR, "{r}");
         // Two starts, 2 mm apart: the value is their mean, with a spread and a noise.
@@ -145,7 +127,7 @@ fn sweep_measures_cost_and_error_marks_the_pareto_front_and_records_failures() {
         assert!((f(r, "sim_time_s") - 2.0 * duration).abs() < 1e-6, "{r}");
     }
     // The noise of an error combines both spreads: sqrt(se_r^2 + se_s^2) / reference.
-    let r = row(results, "robot_rft", "max_dt_s=0.004");
+    let r = row("robot_rft", "max_dt_s=0.004");
     let se = |v: &Value| f(v, "value_std") / 2f64.sqrt();
     let noise = (se(r).powi(2) + se(reference).powi(2)).sqrt() / reference_speed;
     assert!((f(r, "relative_error_noise") - noise).abs() < 1e-12, "{r}");

@@ -476,7 +476,9 @@ mod tests {
         let robot = names(0);
         assert_eq!(robot[..3], ["reference", "baseline", "dx_m=0.02"]);
         assert!(
-            robot.contains(&"E_pa=500000.0") && robot.contains(&"model=rft"),
+            robot.contains(&"E_pa=500000.0")
+                && robot.contains(&"model=rft")
+                && robot.contains(&"particles_per_cell=1"),
             "{robot:?}"
         );
         assert_eq!(robot[robot.len() - 2..], ["coarse_dx2cm_ppc1", "sleep"]);
@@ -487,7 +489,7 @@ mod tests {
         let window = sweep.settings[0].window.unwrap();
         assert!((window.from_s - 0.375).abs() < 1e-12 && (window.until_s - 1.625).abs() < 1e-12);
         assert_eq!(sweep.settings[0].duration_s, window.until_s);
-        assert_eq!(names(1), ["reference", "baseline", "deeper", "wider"]);
+        assert_eq!(names(1), ["reference", "baseline", "shallow_3cm", "wider"]);
         let collapse = names(2);
         assert_eq!(
             collapse[0], "baseline",
