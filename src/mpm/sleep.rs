@@ -150,20 +150,13 @@ impl Sleep {
                 changes.woken += 1;
             }
         }
-        // Sleep: quiet awake runs away from zones and moving blocks.
-        let mut near = vec![false; 0];
-        if !near_zone.is_empty() {
-            near = vec![false; self.asleep.len()];
-            for &k in &near_zone {
-                near[k as usize] = true;
-            }
-        }
+        // Sleep: quiet awake runs away from zones (`near_zone` is sorted) and moving blocks.
         for run in runs(keys) {
             let key = keys[run.start];
             let k = key as usize;
             if self.asleep[k]
                 || self.quiet_s[k] < self.settings.after_s
-                || near.get(k).copied().unwrap_or(false)
+                || near_zone.binary_search(&key).is_ok()
                 || has_moving_neighbour(key)
             {
                 continue;
@@ -177,7 +170,7 @@ impl Sleep {
         changes
     }
 
-    /// Keys of the blocks whose particles lie within `wake_margin_m` of a wake zone.
+    /// Keys of the blocks whose particles lie within `wake_margin_m` of a wake zone, sorted.
     fn blocks_near(&self, grid: &SparseGrid, zones: &[WakeZone]) -> Vec<u32> {
         let margin = self.settings.wake_margin_m;
         let lattice = grid.lattice();
