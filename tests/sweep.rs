@@ -123,6 +123,18 @@ fn sweep_measures_cost_and_error_marks_the_pareto_front_and_records_failures() {
             f(r, "value_std") >= 0.0 && f(r, "relative_error_noise") >= 0.0,
             "{r}"
         );
+        // results.json keeps each start's value: the value is their mean.
+        let starts: Vec<f64> = r["start_values"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        assert_eq!(starts.len(), 2, "{r}");
+        assert!(
+            (starts.iter().sum::<f64>() / 2.0 - f(r, "value")).abs() < 1e-12,
+            "{r}"
+        );
         let duration = f(reference, "sim_time_s") / 2.0;
         assert!((f(r, "sim_time_s") - 2.0 * duration).abs() < 1e-6, "{r}");
     }

@@ -114,6 +114,10 @@ pub struct SettingResult {
     pub value_std: Option<f64>,
     /// Runs made (starts of the robot), each measured.
     pub starts: usize,
+    /// The value of each start, in start order (`results.json` only): pool starts across
+    /// sweeps or settings when a few starts leave the noise unclear.
+    #[serde(default)]
+    pub start_values: Vec<f64>,
     /// What it is held against: the reference run's speed or the published runout.
     pub reference_value: Option<f64>,
     /// `|value - reference_value| / |reference_value|` (0 for the reference run itself).
@@ -509,6 +513,7 @@ fn run_setting(
     let (mean, std) = mean_and_std(&values);
     result.value = Some(mean);
     result.value_std = std;
+    result.start_values = values;
     result
 }
 
