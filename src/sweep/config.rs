@@ -495,7 +495,8 @@ mod tests {
             collapse[0], "baseline",
             "the law is the collapse's reference"
         );
-        assert_eq!(collapse.len(), 10);
+        assert_eq!(collapse.len(), 12);
+        assert_eq!(collapse[10..], ["E_1e5_baseline_dt", "E_1e5_cfl0.2_dt"]);
         let only = sweep.only_studies(&["collapse".into()]).unwrap();
         assert!(only.settings.iter().all(|s| s.study == 2));
     }
