@@ -463,6 +463,30 @@ mod tests {
     const ROBOT_STUDY: &str = "name: s\nstudies:\n  - name: robot\n    base_scene: config/robot_on_sand.yaml\n    quantity: robot_speed\n";
 
     #[test]
+    fn shipped_track_sweeps_start_at_seven_different_places() {
+        let starts = |file: &str| {
+            let sweep = Sweep::load(Path::new(file)).unwrap();
+            assert_eq!(
+                sweep
+                    .settings
+                    .iter()
+                    .map(|s| s.name.as_str())
+                    .collect::<Vec<_>>(),
+                ["reference", "baseline", "window_only"],
+                "{file}"
+            );
+            sweep.settings[0].start_x_m.clone()
+        };
+        let mut all = starts("config/sweeps/track.yaml");
+        all.extend(starts("config/sweeps/track_more_starts.yaml"));
+        let expected = [0.0, 0.002, 0.004, 0.0003, 0.001, 0.0017, 0.0024];
+        assert_eq!(all.len(), expected.len());
+        for (x, e) in all.iter().zip(expected) {
+            assert!((x - e).abs() < 1e-9, "{all:?}");
+        }
+    }
+
+    #[test]
     fn shipped_accuracy_sweep_lists_reference_baseline_axes_and_named_settings() {
         let sweep = Sweep::load(Path::new("config/sweeps/accuracy.yaml")).unwrap();
         let names = |study: usize| -> Vec<&str> {
