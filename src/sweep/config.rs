@@ -463,7 +463,7 @@ mod tests {
     const ROBOT_STUDY: &str = "name: s\nstudies:\n  - name: robot\n    base_scene: config/robot_on_sand.yaml\n    quantity: robot_speed\n";
 
     #[test]
-    fn shipped_track_sweeps_start_at_seven_different_places() {
+    fn shipped_track_and_fine_sweeps_load_with_their_starts() {
         let starts = |file: &str| {
             let sweep = Sweep::load(Path::new(file)).unwrap();
             assert_eq!(
@@ -477,6 +477,9 @@ mod tests {
             );
             sweep.settings[0].start_x_m.clone()
         };
+        let fine = Sweep::load(Path::new("config/sweeps/robot_fine.yaml")).unwrap();
+        assert_eq!(fine.settings.len(), 2);
+        assert_eq!(fine.settings[0].start_x_m, [0.0, 0.002, 0.004]);
         let mut all = starts("config/sweeps/track.yaml");
         all.extend(starts("config/sweeps/track_more_starts.yaml"));
         let expected = [0.0, 0.002, 0.004, 0.0003, 0.001, 0.0017, 0.0024];
