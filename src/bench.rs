@@ -43,9 +43,8 @@ pub struct BenchReport {
 /// A cube of sand of about `particles` particles at 8 per cell, resting on the floor of a box
 /// twice its width, released at t = 0.
 pub fn sand_block(particles: usize) -> Solver {
-    let cells_per_edge = ((particles / PARTICLES_PER_EDGE.pow(3)) as f64)
-        .cbrt()
-        .round() as usize;
+    let cells_per_edge =
+        libm::cbrt((particles / PARTICLES_PER_EDGE.pow(3)) as f64).round() as usize;
     let n = cells_per_edge * PARTICLES_PER_EDGE;
     let side = cells_per_edge as f32 * DX_M;
     let domain = Vector3::new(2.0 * side, 2.0 * side, 1.5 * side);

@@ -33,7 +33,7 @@ pub struct Deposit {
 
 /// Measures the deposit formed by `positions`.
 pub fn measure(g: &CollapseGeometry, positions: &[Vector3<f32>]) -> Deposit {
-    let per_edge = (g.particles_per_cell as f32).cbrt().round();
+    let per_edge = libm::cbrtf(g.particles_per_cell as f32).round();
     let half_spacing = 0.5 * g.dx / per_edge;
     let bins = positions
         .iter()
@@ -64,7 +64,7 @@ pub fn lube_normalized_runout(aspect_ratio: f32) -> Option<f32> {
     if aspect_ratio < 1.8 {
         Some(1.2 * aspect_ratio)
     } else if aspect_ratio > 2.8 {
-        Some(1.9 * aspect_ratio.powf(2.0 / 3.0))
+        Some(1.9 * libm::powf(aspect_ratio, 2.0 / 3.0))
     } else {
         None
     }

@@ -117,8 +117,8 @@ fn alpha_fitted_cs(cos_2b: f64, sin_2b: f64, cos_g: f64, sin_g: f64) -> (f64, f6
 
 /// [`alpha_fitted_cs`] from the angles.
 fn alpha_fitted(beta: f64, gamma: f64) -> (f64, f64) {
-    let (sin_2b, cos_2b) = (2.0 * beta).sin_cos();
-    let (sin_g, cos_g) = gamma.sin_cos();
+    let (sin_2b, cos_2b) = libm::sincos(2.0 * beta);
+    let (sin_g, cos_g) = libm::sincos(gamma);
     alpha_fitted_cs(cos_2b, sin_2b, cos_g, sin_g)
 }
 
@@ -145,7 +145,7 @@ pub fn alpha(beta_rad: f64, gamma_rad: f64) -> (f64, f64) {
     // The range of floor() above is [-pi, pi): move -pi to pi.
     let gamma = if gamma <= -PI { gamma + TAU } else { gamma };
     if (gamma.abs() - FRAC_PI_2).abs() <= VERTICAL_GAMMA_TOLERANCE_RAD {
-        let (sin_2b, cos_2b) = (2.0 * beta_rad).sin_cos();
+        let (sin_2b, cos_2b) = libm::sincos(2.0 * beta_rad);
         alpha_vertical_cs(cos_2b, sin_2b, 1.0f64.copysign(gamma))
     } else if gamma.abs() < FRAC_PI_2 {
         alpha_fitted(beta_rad, gamma)

@@ -371,7 +371,7 @@ impl Sheet {
                 let p = points[tri[k] as usize];
                 let u = points[tri[(k + 1) % 3] as usize] - p;
                 let v = points[tri[(k + 2) % 3] as usize] - p;
-                let angle = u.cross(v).length().atan2(u.dot(v));
+                let angle = libm::atan2f(u.cross(v).length(), u.dot(v));
                 vertex_normals[tri[k] as usize] += angle * face_normals[t];
                 vertex_angles[tri[k] as usize] += angle;
             }

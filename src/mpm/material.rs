@@ -64,7 +64,7 @@ pub struct DruckerPrager {
 impl DruckerPrager {
     /// `friction_angle_rad`: internal friction angle phi (rad), typically 30-40 deg for sand.
     pub fn new(lame: Lame, friction_angle_rad: f32, volume_correction: bool) -> Self {
-        let sin_phi = friction_angle_rad.sin();
+        let sin_phi = libm::sinf(friction_angle_rad);
         Self {
             lame,
             alpha: (2.0f32 / 3.0).sqrt() * 2.0 * sin_phi / (3.0 - sin_phi),
@@ -536,12 +536,14 @@ mod tests {
                 let tau = model.kirchhoff_stress(&r);
                 assert!(tau.norm() < 1e-5 * (l.mu + l.lambda), "{model:?} {tau}");
             }
-            // A sand update of a rotation is a no-op with zero stress.
+            // A sand update of a rotation is a no-op with zero stress, up to rounding: the f32 SVD
+            // of a rotation gives singular values within 5 ulps of 1 (6e-7; 1 ulp on average),
+            // and vc sums their three logs.
             let r = rotation(&mut rng);
             let (mut f, mut vc) = (r, 0.0);
             let tau = sand(true).update(&mut f, &mut vc, &mut COLD_START.clone());
             assert!(
-                tau.norm() < 1e-5 * (l.mu + l.lambda) && (f - r).norm() < 1e-6 && vc.abs() < 1e-6,
+                tau.norm() < 1e-5 * (l.mu + l.lambda) && (f - r).norm() < 1e-6 && vc.abs() < 3e-6,
                 "tau {tau} f - r {} vc {vc} svd {:?}",
                 f - r,
                 svd3(&r)

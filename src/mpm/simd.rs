@@ -61,10 +61,13 @@ impl F4 {
     pub fn sqrt(self) -> Self {
         Self(unsafe { std::arch::x86_64::_mm_sqrt_ps(self.0) })
     }
-    /// About 12 bits; exactness is not needed where it is used.
+    /// `1 / sqrt(x)`, correctly rounded twice (square root, then division), so every x86-64
+    /// CPU gives the same bits. `_mm_rsqrt_ps` would be faster, but its 12-bit approximation
+    /// differs between CPU vendors (and emulators), which made runs differ between machines.
     #[inline(always)]
-    pub fn rsqrt_approx(self) -> Self {
-        Self(unsafe { std::arch::x86_64::_mm_rsqrt_ps(self.0) })
+    pub fn rsqrt(self) -> Self {
+        use std::arch::x86_64::*;
+        Self(unsafe { _mm_div_ps(_mm_set1_ps(1.0), _mm_sqrt_ps(self.0)) })
     }
     /// Lane-wise AND of two masks.
     #[inline(always)]
@@ -211,7 +214,7 @@ impl F4 {
     pub fn sqrt(self) -> Self {
         self.map(f32::sqrt)
     }
-    pub fn rsqrt_approx(self) -> Self {
+    pub fn rsqrt(self) -> Self {
         self.map(|x| 1.0 / x.sqrt())
     }
     pub fn and(self, o: Self) -> Self {
@@ -305,7 +308,7 @@ pub trait Lanes:
     fn min(self, o: Self) -> Self;
     fn max(self, o: Self) -> Self;
     fn sqrt(self) -> Self;
-    fn rsqrt_approx(self) -> Self;
+    fn rsqrt(self) -> Self;
     fn pow2_normalizers(self) -> (Self, Self);
     /// Whether any lane of a comparison mask is set.
     fn any(self) -> bool;
@@ -363,8 +366,8 @@ impl Lanes for F4 {
         F4::sqrt(self)
     }
     #[inline(always)]
-    fn rsqrt_approx(self) -> Self {
-        F4::rsqrt_approx(self)
+    fn rsqrt(self) -> Self {
+        F4::rsqrt(self)
     }
     #[inline(always)]
     fn pow2_normalizers(self) -> (Self, Self) {
@@ -477,8 +480,8 @@ impl Lanes for F4x2 {
         F4x2(self.0.sqrt(), self.1.sqrt())
     }
     #[inline(always)]
-    fn rsqrt_approx(self) -> Self {
-        F4x2(self.0.rsqrt_approx(), self.1.rsqrt_approx())
+    fn rsqrt(self) -> Self {
+        F4x2(self.0.rsqrt(), self.1.rsqrt())
     }
     #[inline(always)]
     fn pow2_normalizers(self) -> (Self, Self) {

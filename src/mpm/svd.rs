@@ -12,7 +12,9 @@
 //!    for any finite input, and underflow only of parts below ~1e-19 of the largest entry);
 //! 2. cyclic Jacobi sweeps on the symmetric `v0^T a^T a v0`, with the paper's approximate
 //!    (quaternion half-angle) Givens rotations and its rescaling trick, so the only square root
-//!    is an inexact reciprocal one; `v` is accumulated as a quaternion starting from `v0`;
+//!    is a reciprocal one (correctly rounded, not the paper's `rsqrtps` estimate, whose bits
+//!    differ between CPUs: `docs/determinism.md`); `v` is accumulated as a quaternion starting
+//!    from `v0`;
 //! 3. `b = a v`, columns sorted by decreasing norm (each swap negates one column: det v stays +1);
 //! 4. Givens QR of `b` with exact rotations: `u` is their product, `sigma` the diagonal of `r`.
 //!
@@ -133,7 +135,7 @@ fn jacobi_rotation<L: Lanes, const P: usize, const Q: usize, const K: usize>(
     // Half-angle of the rotation that zeroes s_pq, to first order: tan = s_pq / (2 (s_pp - s_qq)).
     let (ch, sh) = (two * (spp - sqq), spq);
     let (ch2, sh2) = (ch * ch, sh * sh);
-    let w = (ch2 + sh2).rsqrt_approx();
+    let w = (ch2 + sh2).rsqrt();
     let use_approx = (L::splat(GAMMA) * sh2 + L::splat(TINY)).lt(ch2);
     // Beyond pi/8 the paper's fixed pi/8; nothing to do where s_pq is exactly zero.
     let sh_zero = sh.eq(L::splat(0.0));
@@ -141,7 +143,7 @@ fn jacobi_rotation<L: Lanes, const P: usize, const Q: usize, const K: usize>(
     let sh_fixed = L::select(sh_zero, L::splat(0.0), L::splat(SIN_PI_8));
     let ch = L::select(use_approx, w * ch, ch_fixed);
     let sh = L::select(use_approx, w * sh, sh_fixed);
-    // Rotation by twice the half-angle, scaled by g = ch^2 + sh^2 (1 up to the inexact rsqrt):
+    // Rotation by twice the half-angle, scaled by g = ch^2 + sh^2 (1 up to rounding):
     // the whole of s is scaled by g^2 so that it stays a similarity transform.
     let (ch2, sh2) = (ch * ch, sh * sh);
     let g = ch2 + sh2;

@@ -223,8 +223,8 @@ pub fn wrap_to_pi(a: f64) -> f64 {
 pub fn circular_mean(angles: impl IntoIterator<Item = f64>) -> f64 {
     let (s, c) = angles
         .into_iter()
-        .fold((0.0, 0.0), |(s, c), a| (s + a.sin(), c + a.cos()));
-    wrap_to_tau(s.atan2(c))
+        .fold((0.0, 0.0), |(s, c), a| (s + libm::sin(a), c + libm::cos(a)));
+    wrap_to_tau(libm::atan2(s, c))
 }
 
 #[cfg(test)]

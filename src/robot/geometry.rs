@@ -178,7 +178,7 @@ impl LegParams {
         let (a, b) = (0.5 * (half_len + s), 0.5 * (half_len - s));
         let bulge = 2.0 * k * a * b * sinc(k * a) * sinc(k * b);
         let position_m = [-bulge, 0.0, -self.half_chord_m() - along];
-        let tangent = [(k * s).sin(), 0.0, -(k * s).cos()];
+        let tangent = [libm::sin(k * s), 0.0, -libm::cos(k * s)];
         let normal = [tangent[2], 0.0, -tangent[0]];
         ArcPoint {
             position_m,
@@ -316,7 +316,7 @@ impl LegParams {
                 LegBox {
                     centre_m: c.position_m,
                     // Rotation about +y that takes the box's x axis onto the tangent.
-                    pitch_rad: (-c.tangent[2]).atan2(c.tangent[0]),
+                    pitch_rad: libm::atan2(-c.tangent[2], c.tangent[0]),
                     size_m: [length, self.width_m, self.thickness_m],
                 }
             })
@@ -566,7 +566,7 @@ fn sinc(x: f64) -> f64 {
     if x.abs() < SERIES_CUTOFF {
         1.0 - x * x / 6.0
     } else {
-        x.sin() / x
+        libm::sin(x) / x
     }
 }
 
@@ -575,7 +575,7 @@ fn asin_over(x: f64) -> f64 {
     if x.abs() < SERIES_CUTOFF {
         1.0 + x * x / 6.0
     } else {
-        x.asin() / x
+        libm::asin(x) / x
     }
 }
 

@@ -331,7 +331,9 @@ impl RobotSim {
     fn record_step(&mut self) {
         let rot = *self.world.bodies[self.body].rotation();
         let up = rot * Vec3::Z;
-        self.max_tilt_rad = self.max_tilt_rad.max((up.z as f64).clamp(-1.0, 1.0).acos());
+        self.max_tilt_rad = self
+            .max_tilt_rad
+            .max(libm::acos((up.z as f64).clamp(-1.0, 1.0)));
         let yaw = self.yaw_rad();
         self.yaw_change_rad += super::gait::wrap_to_pi(yaw - self.last_yaw_rad);
         self.last_yaw_rad = yaw;
@@ -340,7 +342,7 @@ impl RobotSim {
     /// Heading of the body's x axis projected on the ground (rad).
     fn yaw_rad(&self) -> f64 {
         let fwd = *self.world.bodies[self.body].rotation() * Vec3::X;
-        (fwd.y as f64).atan2(fwd.x as f64)
+        libm::atan2(fwd.y as f64, fwd.x as f64)
     }
 
     /// Angle (rad) and speed (rad/s) of leg `i`.

@@ -46,6 +46,9 @@ pub struct RunSummary {
     pub metrics: Map<String, Value>,
     /// True when the run was stopped before its end (Ctrl-C).
     pub stopped_early: bool,
+    /// SHA-256 of the final state's bits ([`Simulation::state_digest`]): equal digests, equal
+    /// runs.
+    pub state_digest: String,
 }
 
 #[derive(thiserror::Error, Debug)]
@@ -297,6 +300,7 @@ impl RunSummary {
             stage_times_s,
             metrics,
             stopped_early,
+            state_digest: sim.state_digest(),
         }
     }
 }

@@ -29,7 +29,7 @@ const LOG_AXIS_LABELS: usize = 12;
 fn short_number(v: f64) -> String {
     let text = format!(
         "{:.*}",
-        (2 - v.abs().log10().floor() as i32).max(0) as usize,
+        (2 - libm::log10(v.abs()).floor() as i32).max(0) as usize,
         v
     );
     if text.contains('.') {

@@ -654,7 +654,7 @@ fn pose_summary(path: &Path, source: &str, pose: &[TimedPose]) -> BagSummary {
         .iter()
         .map(|(_, p)| {
             let body_up = p.rotation * Vector3::z();
-            body_up.z.clamp(-1.0, 1.0).acos().to_degrees()
+            libm::acos(body_up.z.clamp(-1.0, 1.0)).to_degrees()
         })
         .fold(0.0, f64::max);
     BagSummary {
