@@ -8,11 +8,15 @@
 pub mod analysis;
 pub mod bag;
 pub mod bench;
+pub mod cli;
+pub mod config_error;
 pub mod coupling;
 pub mod experiment;
 pub mod mpm;
 pub mod msgs;
+pub mod progress;
 pub mod robot;
 pub mod ros;
 pub mod scene;
 pub mod sweep;
+pub mod terrain;

@@ -16,9 +16,9 @@
 
 use std::path::Path;
 
-use sandstep::coupling::plate::{depth_cell_means, press_plate, PlatePress};
 use sandstep::robot::HexapodParams;
 use sandstep::scene::Scene;
+use sandstep::terrain::plate::{depth_cell_means, press_plate, PlatePress};
 
 const SCENE: &str = "config/robot_on_sand.yaml";
 /// Half side of the square bed around the plate (m): the shipped bed's half width.

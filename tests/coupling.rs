@@ -6,9 +6,9 @@ use rapier3d::glamx::Vec3;
 use rapier3d::prelude::{
     ColliderBuilder, PhysicsWorld, RigidBodyBuilder, RigidBodyHandle, RigidBodySet, SharedShape,
 };
-use sandstep::coupling::plate::{depth_cell_means, fit_line, press_plate, PlatePress};
 use sandstep::coupling::{Coupling, CouplingMode, CpicSurface};
 use sandstep::mpm::Solver;
+use sandstep::terrain::plate::{depth_cell_means, fit_line, press_plate, PlatePress};
 
 mod sand_support;
 use sand_support::{collider, run, solver, DX};

@@ -15,7 +15,7 @@
 use std::path::Path;
 use std::process::Command;
 
-use sandstep::scene::terrain::POPPY_SEEDS_ZETA_N_M3;
+use sandstep::terrain::POPPY_SEEDS_ZETA_N_M3;
 use serde_json::Value;
 
 /// The columns `docs/experiment.md` documents for `results.csv`.

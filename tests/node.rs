@@ -107,7 +107,7 @@ fn node_publishes_obeys_commands_pauses_resets_and_records() {
         duration_s: None,
         realtime: true,
         bag_dir: Some(bag_dir.clone()),
-        progress: false,
+        progress: Default::default(),
         stop: stop.clone(),
     };
     let node_thread = std::thread::spawn(move || run_node(&scene, &opts));

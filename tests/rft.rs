@@ -8,9 +8,8 @@ use std::path::Path;
 use nalgebra::Vector3;
 use rapier3d::glamx::Vec3;
 use rapier3d::prelude::{ColliderBuilder, ColliderSet, RigidBodyBuilder, RigidBodySet};
-use sandstep::coupling::rft::RftTerrain;
-use sandstep::scene::calibrate_rft::calibrate_rft;
 use sandstep::scene::{Scene, Simulation};
+use sandstep::terrain::rft::RftTerrain;
 
 const SCENE: &str = "config/robot_on_sand.yaml";
 /// Frame of the stepping loops (s).
@@ -37,7 +36,7 @@ fn calibrated_zeta_reproduces_the_mpm_plate_force() {
     .map(String::from)
     .to_vec();
     let scene = scene(&overrides);
-    let c = calibrate_rft(&scene).unwrap();
+    let c = scene.calibrate_rft().unwrap();
     println!(
         "zeta {:.4e} N/m^3, R^2 {:.3}, {} particles, {:.1} s wall; cells (mm, N): {:?}",
         c.zeta_n_m3,
@@ -161,8 +160,8 @@ fn auto_step_walks_as_far_as_quarter_millisecond_steps() {
     // The auto step is 1.03 ms on the stiff default zeta and 8 ms on poppy seeds; explicit
     // depth forces walked 11 % too far at 1 ms on the default zeta, and tipped the robot at 4.
     for zeta in [
-        sandstep::scene::terrain::DEFAULT_ZETA_N_M3,
-        sandstep::scene::terrain::POPPY_SEEDS_ZETA_N_M3,
+        sandstep::terrain::DEFAULT_ZETA_N_M3,
+        sandstep::terrain::POPPY_SEEDS_ZETA_N_M3,
     ] {
         let auto = walked_m(zeta, "auto", 0.5, 3.0);
         let fine = walked_m(zeta, "0.00025", 0.5, 3.0);

@@ -126,7 +126,10 @@ fn body_outside_the_domain() {
 #[test]
 fn missing_file() {
     let e = Scene::load(Path::new("config/no_such_scene.yaml"), &[]).unwrap_err();
-    assert!(matches!(e, SceneError::Read { .. }));
+    assert!(matches!(
+        e,
+        SceneError::Config(sandstep::config_error::ConfigError::Read { .. })
+    ));
     assert_names(
         &e.to_string(),
         &["config/no_such_scene.yaml", "cannot read"],

@@ -58,10 +58,22 @@ pub enum PlotError {
         path: PathBuf,
         source: std::io::Error,
     },
-    #[error("{}: {message}", path.display())]
-    Draw { path: PathBuf, message: String },
+    #[error("{}: {source}", path.display())]
+    Draw { path: PathBuf, source: DrawError },
     #[error("the embedded plot font did not load")]
     Font,
+}
+
+/// A plotters error met while drawing, as its message: plotters' error type is generic over
+/// the drawing backend, so every chart (PNG or SVG) reports this one type.
+#[derive(thiserror::Error, Debug, Clone)]
+#[error("{0}")]
+pub struct DrawError(String);
+
+impl<E: std::error::Error + Send + Sync> From<DrawingAreaErrorKind<E>> for DrawError {
+    fn from(e: DrawingAreaErrorKind<E>) -> Self {
+        DrawError(e.to_string())
+    }
 }
 
 /// Registers the embedded font for every family plotters uses, once per process.
@@ -125,8 +137,8 @@ impl Plot {
         self,
         root: &DrawingArea<DB, Shift>,
         series: &BagSeries,
-    ) -> Result<(), String> {
-        root.fill(&WHITE).map_err(|e| e.to_string())?;
+    ) -> Result<(), DrawError> {
+        root.fill(&WHITE)?;
         match self {
             Plot::TrajectoryXy => draw_trajectory(root, series),
             Plot::Speed => draw_speed(root, series),
@@ -142,9 +154,8 @@ impl Plot {
                 "force magnitude |F| (N)",
                 &series.leg_forces,
             ),
-        }
-        .map_err(|e| e.to_string())?;
-        root.present().map_err(|e| e.to_string())
+        }?;
+        Ok(root.present()?)
     }
 }
 
@@ -168,7 +179,7 @@ pub fn write_plots(analysis: &BagAnalysis, dir: &Path) -> Result<PlotsWritten, P
         let png = dir.join(format!("{}.png", plot.file_stem()));
         let draw_error = |path: &Path| {
             let path = path.to_path_buf();
-            move |message| PlotError::Draw { path, message }
+            move |source| PlotError::Draw { path, source }
         };
         plot.draw(
             &BitMapBackend::new(&png, PLOT_SIZE).into_drawing_area(),

@@ -8,8 +8,6 @@
 //! return the impulse each collider received; two-way colliders get it as a force over the
 //! substep, to be applied by the rapier step of the same dt that the caller takes next.
 
-pub mod plate;
-pub mod rft;
 pub mod surface;
 
 use nalgebra::Vector3;
@@ -21,7 +19,7 @@ use crate::mpm::cpic::{ColliderImpulse, ColliderMotion, ColourBlock, NodeColour,
 use crate::mpm::grid::{node_in_block, BLOCK_EDGE};
 use crate::mpm::sleep::WakeZone;
 use crate::mpm::{SimError, Solver};
-pub use surface::{CpicSurface, SurfaceSample};
+pub use surface::{CpicSurface, SurfaceError, SurfaceSample};
 
 /// Half-width of the narrow band around each collider in which grid nodes are coloured, in grid
 /// cells: the reach of the quadratic B-spline stencil.
@@ -75,8 +73,8 @@ pub enum CouplingError {
     TooManyColliders { count: usize },
     #[error("collider {name}: its body is not in the rapier world")]
     MissingBody { name: String },
-    #[error("{name}: cannot make its sand surface: {message}")]
-    Surface { name: String, message: String },
+    #[error("{name}: cannot make its sand surface: {source}")]
+    Surface { name: String, source: SurfaceError },
 }
 
 /// The colliders coupled to one sand solver.
@@ -244,8 +242,8 @@ pub fn body_surfaces(
     bodies: &RigidBodySet,
     colliders: &ColliderSet,
     thin_m: f32,
-) -> Result<Vec<(Pose, CpicSurface)>, String> {
-    let rb = bodies.get(body).ok_or("body not in the world")?;
+) -> Result<Vec<(Pose, CpicSurface)>, SurfaceError> {
+    let rb = bodies.get(body).ok_or(SurfaceError::MissingBody)?;
     let mut chain = Vec::new();
     let mut surfaces = Vec::new();
     for &handle in rb.colliders() {
@@ -270,9 +268,9 @@ pub fn body_surfaces(
 /// two, the longer is the width, the shorter the thickness. (Not by size alone: the boxes of a
 /// straight or slightly curved leg are shorter along the chain than the leg is thick.) A chain
 /// of one box runs along its longest axis, across its middle one.
-pub fn box_chain_sheet(boxes: &[(Pose, Vec3)]) -> Result<CpicSurface, String> {
+pub fn box_chain_sheet(boxes: &[(Pose, Vec3)]) -> Result<CpicSurface, SurfaceError> {
     if boxes.is_empty() {
-        return Err("no boxes".into());
+        return Err(SurfaceError::NoBoxes);
     }
     let centre = |i: usize| boxes[i].0.translation;
     // Direction of the chain at box i: towards the next box (from the previous for the last).
@@ -311,10 +309,10 @@ pub fn box_chain_sheet(boxes: &[(Pose, Vec3)]) -> Result<CpicSurface, String> {
         let ((c0, l0, w0), (c1, l1, w1)) = (pair[0], pair[1]);
         let (end, start) = (c0 + l0, c1 - l1);
         if end.distance(start) > 0.5 * l0.length().min(l1.length()) {
-            return Err(format!(
-                "thin boxes do not form a chain: a box ends at {end:?} m, the next starts at \
-                 {start:?} m"
-            ));
+            return Err(SurfaceError::NotAChain {
+                end_m: end.to_array(),
+                start_m: start.to_array(),
+            });
         }
         stations.push(((end + start) * 0.5, (w0 + w1) * 0.5));
     }

@@ -134,7 +134,7 @@ impl CpicSurface {
     /// positive side is the side the right-hand-rule normal points to. Errors on an empty or
     /// degenerate mesh, an index out of range, an edge shared by more than two triangles, or
     /// two neighbours wound in opposite senses; see [`Sheet::new`].
-    pub fn sheet(vertices: Vec<[f32; 3]>, triangles: Vec<[u32; 3]>) -> Result<Self, String> {
+    pub fn sheet(vertices: Vec<[f32; 3]>, triangles: Vec<[u32; 3]>) -> Result<Self, SurfaceError> {
         Sheet::new(vertices, triangles).map(|sheet| Self::Sheet(Box::new(sheet)))
     }
 
@@ -259,31 +259,73 @@ pub struct Sheet {
     aabb: ([f32; 3], [f32; 3]),
 }
 
+/// Why a body's colliders do not make a sand surface: the vertices and triangles do not make a
+/// sheet, the thin boxes no chain, or the body is missing.
+#[derive(thiserror::Error, Debug, Clone, PartialEq)]
+pub enum SurfaceError {
+    #[error("a sheet needs at least one triangle")]
+    NoTriangles,
+    #[error("vertex {vertex} is not finite: {position:?}")]
+    NonFiniteVertex { vertex: usize, position: [f32; 3] },
+    #[error("triangle {triangle} refers to vertex {vertex}, but there are {vertices}")]
+    NoSuchVertex {
+        triangle: usize,
+        vertex: u32,
+        vertices: usize,
+    },
+    #[error("triangle {triangle} {vertices:?} is degenerate")]
+    Degenerate { triangle: usize, vertices: [u32; 3] },
+    #[error("triangles {} and {} are wound in opposite senses along their shared edge {edge:?}", triangles[0], triangles[1])]
+    OppositeWinding {
+        triangles: [usize; 2],
+        edge: [u32; 2],
+    },
+    #[error("the sheet folds back onto itself at edge {edge:?}")]
+    FoldsAtEdge { edge: [u32; 2] },
+    #[error("the sheet folds back onto itself at vertex {vertex}")]
+    FoldsAtVertex { vertex: usize },
+    #[error("edge {edge:?} borders {triangles} triangles; a sheet's edges border one or two")]
+    EdgeBordersMany { edge: [u32; 2], triangles: usize },
+    /// parry's message (its builder error is not `Clone`).
+    #[error("{0}")]
+    Mesh(String),
+    #[error("no boxes")]
+    NoBoxes,
+    #[error("body not in the world")]
+    MissingBody,
+    #[error("thin boxes do not form a chain: a box ends at {end_m:?} m, the next starts at {start_m:?} m")]
+    NotAChain { end_m: [f32; 3], start_m: [f32; 3] },
+}
+
 impl Sheet {
     /// Builds a sheet from vertices (m) and triangles wound consistently (the positive side is
     /// the side of the right-hand-rule normal). Unused vertices are allowed. Errors on no
     /// triangles, a non-finite vertex, an index out of range, a triangle with collinear
     /// vertices, an edge bordering more than two triangles, two neighbours wound in opposite
     /// senses, or a sheet folding back onto itself (a pseudo-normal of nearly zero length).
-    pub fn new(vertices: Vec<[f32; 3]>, triangles: Vec<[u32; 3]>) -> Result<Self, String> {
+    pub fn new(vertices: Vec<[f32; 3]>, triangles: Vec<[u32; 3]>) -> Result<Self, SurfaceError> {
         if triangles.is_empty() {
-            return Err("a sheet needs at least one triangle".into());
+            return Err(SurfaceError::NoTriangles);
         }
         if let Some(i) = vertices
             .iter()
             .position(|v| !v.iter().all(|x| x.is_finite()))
         {
-            return Err(format!("vertex {i} is not finite: {:?}", vertices[i]));
+            return Err(SurfaceError::NonFiniteVertex {
+                vertex: i,
+                position: vertices[i],
+            });
         }
         let points: Vec<Vec3> = vertices.iter().map(|&v| Vec3::from(v)).collect();
 
         let mut face_normals = Vec::with_capacity(triangles.len());
         for (t, tri) in triangles.iter().enumerate() {
             if let Some(i) = tri.iter().find(|&&i| i as usize >= points.len()) {
-                return Err(format!(
-                    "triangle {t} refers to vertex {i}, but there are {}",
-                    points.len()
-                ));
+                return Err(SurfaceError::NoSuchVertex {
+                    triangle: t,
+                    vertex: *i,
+                    vertices: points.len(),
+                });
             }
             let [a, b, c] = tri.map(|i| points[i as usize]);
             let doubled_area = (b - a).cross(c - a);
@@ -292,7 +334,10 @@ impl Sheet {
                 .max((c - a).length_squared())
                 .max((c - b).length_squared());
             if at_most(doubled_area.length(), MIN_TRIANGLE_AREA_RATIO * longest_sq) {
-                return Err(format!("triangle {t} {tri:?} is degenerate"));
+                return Err(SurfaceError::Degenerate {
+                    triangle: t,
+                    vertices: *tri,
+                });
             }
             face_normals.push(doubled_area.normalize());
         }
@@ -341,25 +386,23 @@ impl Sheet {
                 [(t1, e1), (t2, e2)] => {
                     let (d1, d2) = (directed(t1, e1), directed(t2, e2));
                     if d1 != (d2.1, d2.0) {
-                        return Err(format!(
-                            "triangles {t1} and {t2} are wound in opposite senses along their \
-                             shared edge ({a}, {b})"
-                        ));
+                        return Err(SurfaceError::OppositeWinding {
+                            triangles: [t1, t2],
+                            edge: [*a, *b],
+                        });
                     }
                     let sum = face_normals[t1] + face_normals[t2];
                     if at_most(sum.length(), 2.0 * MIN_PSEUDO_NORMAL_COHERENCE) {
-                        return Err(format!(
-                            "the sheet folds back onto itself at edge ({a}, {b})"
-                        ));
+                        return Err(SurfaceError::FoldsAtEdge { edge: [*a, *b] });
                     }
                     edge_normals[t1][e1] = sum.normalize();
                     edge_normals[t2][e2] = sum.normalize();
                 }
                 _ => {
-                    return Err(format!(
-                        "edge ({a}, {b}) borders {} triangles; a sheet's edges border one or two",
-                        sides.len()
-                    ))
+                    return Err(SurfaceError::EdgeBordersMany {
+                        edge: [*a, *b],
+                        triangles: sides.len(),
+                    })
                 }
             }
         }
@@ -381,7 +424,7 @@ impl Sheet {
                 continue; // unused vertex
             }
             if at_most(n.length(), MIN_PSEUDO_NORMAL_COHERENCE * angle) {
-                return Err(format!("the sheet folds back onto itself at vertex {i}"));
+                return Err(SurfaceError::FoldsAtVertex { vertex: i });
             }
             *n = n.normalize();
         }
@@ -390,7 +433,8 @@ impl Sheet {
         let (min, max) = used.fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
             (lo.min(p), hi.max(p))
         });
-        let mesh = TriMesh::new(points, triangles).map_err(|e| e.to_string())?;
+        let mesh =
+            TriMesh::new(points, triangles).map_err(|e| SurfaceError::Mesh(e.to_string()))?;
         Ok(Self {
             mesh,
             face_normals,

@@ -10,8 +10,8 @@ use plotters::prelude::*;
 use super::config::TerrainModel;
 use super::results::RunResult;
 use crate::analysis::plots::{
-    chart, draw_legend, legend_line, line_style, padded_range, register_fonts, DrawResult,
-    PlotError, LABEL_FONT_SIZE, MARKER_RADIUS_PX, PLOT_SIZE,
+    chart, draw_legend, legend_line, line_style, padded_range, register_fonts, DrawError,
+    DrawResult, PlotError, LABEL_FONT_SIZE, MARKER_RADIUS_PX, PLOT_SIZE,
 };
 
 /// File name (without extension) of the chart.
@@ -58,7 +58,7 @@ pub fn write_speed_chart(
     let svg = dir.join(format!("{SPEED_CHART}.svg"));
     let fail = |path: &Path| {
         let path = path.to_path_buf();
-        move |message: String| PlotError::Draw { path, message }
+        move |source: DrawError| PlotError::Draw { path, source }
     };
     draw(
         &BitMapBackend::new(&png, size).into_drawing_area(),
@@ -82,8 +82,8 @@ fn draw<DB: DrawingBackend>(
     runs: &[RunResult],
     models: &[TerrainModel],
     frequencies_hz: &[f64],
-) -> Result<(), String> {
-    root.fill(&WHITE).map_err(|e| e.to_string())?;
+) -> Result<(), DrawError> {
+    root.fill(&WHITE)?;
     // One speed axis for all panels, 0 included.
     let all: Vec<Point> = models
         .iter()
@@ -96,10 +96,9 @@ fn draw<DB: DrawingBackend>(
     );
     let panels = root.split_evenly((1, models.len().max(1)));
     for (panel, &model) in panels.iter().zip(models) {
-        draw_panel(panel, runs, model, frequencies_hz, speed_range.clone())
-            .map_err(|e| e.to_string())?;
+        draw_panel(panel, runs, model, frequencies_hz, speed_range.clone())?;
     }
-    root.present().map_err(|e| e.to_string())
+    Ok(root.present()?)
 }
 
 fn draw_panel<DB: DrawingBackend>(

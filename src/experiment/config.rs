@@ -7,7 +7,8 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::ExperimentError;
-use crate::robot::UrdfArgs;
+use crate::config_error::ConfigError;
+use crate::robot::HexapodParams;
 use crate::scene::overrides::{deserialize_with_overrides, YamlProblem};
 use crate::scene::Scene;
 
@@ -78,15 +79,18 @@ pub struct ExperimentConfig {
 
 /// Checks that `name` can name an output folder or file: letters, digits, `_`, `-`, `.`
 /// (not first).
-pub fn check_output_name(name: &str) -> Result<(), String> {
+pub fn check_output_name(name: &str) -> Result<(), UnsafeName> {
     let safe = |ch: char| ch.is_ascii_alphanumeric() || "_-.".contains(ch);
     if name.is_empty() || !name.chars().all(safe) || name.starts_with('.') {
-        return Err(format!(
-            "'{name}' must be letters, digits, '_', '-' or '.' (not first)"
-        ));
+        return Err(UnsafeName(name.to_string()));
     }
     Ok(())
 }
+
+/// A name that cannot name an output folder or file ([`check_output_name`]).
+#[derive(thiserror::Error, Debug, Clone, PartialEq, Eq)]
+#[error("'{0}' must be letters, digits, '_', '-' or '.' (not first)")]
+pub struct UnsafeName(pub String);
 
 /// Settling times within this many gait cycles above a whole number of cycles round down.
 const SETTLE_ROUNDING_TOLERANCE: f64 = 1e-9;
@@ -156,10 +160,7 @@ impl Experiment {
     /// Reads, parses (unknown keys are errors) and validates an experiment file. `overrides`
     /// are `key.path=value` changes to the experiment file itself (e.g. `cycles=2`).
     pub fn load(file: &Path, overrides: &[String]) -> Result<Self, ExperimentError> {
-        let text = std::fs::read_to_string(file).map_err(|source| ExperimentError::Read {
-            file: file.to_path_buf(),
-            source,
-        })?;
+        let text = ConfigError::read("experiment", file)?;
         Self::from_yaml(&text, file, overrides)
     }
 
@@ -171,7 +172,7 @@ impl Experiment {
         overrides: &[String],
     ) -> Result<Self, ExperimentError> {
         let config: ExperimentConfig =
-            deserialize_with_overrides(text, overrides).map_err(|e| ExperimentError::Parse {
+            deserialize_with_overrides(text, overrides).map_err(|e| ConfigError::Parse {
                 file: file.to_path_buf(),
                 message: match e {
                     YamlProblem::Parse(message) => message,
@@ -187,11 +188,12 @@ impl Experiment {
     }
 
     fn invalid(&self, field: impl Into<String>, message: impl Into<String>) -> ExperimentError {
-        ExperimentError::Invalid {
+        ConfigError::Invalid {
             file: self.file.clone(),
             field: field.into(),
             message: message.into(),
         }
+        .into()
     }
 
     /// Checks every value and that the base scene, with the common overrides, is a robot scene.
@@ -199,7 +201,7 @@ impl Experiment {
     #[allow(clippy::neg_cmp_op_on_partial_ord)]
     pub fn validate(&self) -> Result<(), ExperimentError> {
         let c = &self.config;
-        check_output_name(&c.name).map_err(|message| self.invalid("name", message))?;
+        check_output_name(&c.name).map_err(|e| self.invalid("name", e.to_string()))?;
         let list = |field: &str, values: &[f64], check: &dyn Fn(f64) -> bool, range: &str| {
             if values.is_empty() {
                 return Err(self.invalid(field, "needs at least one value"));
@@ -257,9 +259,7 @@ impl Experiment {
             ));
         }
         for &k in &c.curvatures_per_r {
-            if let Err((field, value, reason)) =
-                self.urdf_args(k, Path::new("")).params().validate()
-            {
+            if let Err((field, value, reason)) = self.robot_params(k).validate() {
                 return Err(self.invalid(
                     "robot_total_mass_kg",
                     format!("at curvature {k}: the robot's {field} would be {value}: {reason}"),
@@ -283,20 +283,14 @@ impl Experiment {
         Ok(())
     }
 
-    /// The `sandstep urdf` arguments of the robot with legs of `curvature_per_r`, written to
-    /// `urdf`.
-    pub fn urdf_args(&self, curvature_per_r: f64, urdf: &Path) -> UrdfArgs {
-        let defaults = crate::robot::LegParams::default();
-        UrdfArgs {
-            output: Some(urdf.to_path_buf()),
-            curvature: curvature_per_r,
-            reversed: false,
-            chord_m: defaults.chord_m,
-            width_m: defaults.width_m,
-            thickness_m: defaults.thickness_m,
-            density_kg_m3: defaults.density_kg_m3,
+    /// The robot with legs of `curvature_per_r` (units of 1/R): the published robot's legs
+    /// and the experiment's total mass (`robot_total_mass_kg`).
+    pub fn robot_params(&self, curvature_per_r: f64) -> HexapodParams {
+        HexapodParams {
             total_mass_kg: self.config.robot_total_mass_kg,
+            ..HexapodParams::default()
         }
+        .with_curvature(curvature_per_r)
     }
 
     /// When the measurement of a run at `frequency_hz` starts (s): a quarter cycle
@@ -543,7 +537,7 @@ mod tests {
     fn urdf_arguments_keep_the_total_mass() {
         let e = load("name: s\nrobot_total_mass_kg: 0.1\n", &[]).unwrap();
         for k in [-1.0, 0.0, 0.5] {
-            let p = e.urdf_args(k, Path::new("x.urdf")).params();
+            let p = e.robot_params(k);
             assert!((p.total_mass_kg - 0.1).abs() < 1e-15);
             assert!(
                 (p.legs.curvature_per_m - k / p.legs.half_chord_m()).abs() < 1e-9,

@@ -27,8 +27,8 @@ pub use results::{results_csv, write_results_csv, RunResult, CSV_COLUMNS, STATUS
 
 use crate::analysis::bag::{analyze_bag_with, AnalysisOptions};
 use crate::analysis::plots::PlotError;
+use crate::progress::Progress;
 use crate::robot::RobotMetrics;
-use crate::scene::progress::RunsProgress;
 use crate::scene::{Observer, RunOptions, Scene, SceneError, Simulation};
 
 /// Parent of the default output folders.
@@ -48,24 +48,8 @@ pub const MASS_TOLERANCE_KG: f64 = 1e-6;
 /// Why an experiment could not be run at all (a failing run is not an error: it is recorded).
 #[derive(thiserror::Error, Debug)]
 pub enum ExperimentError {
-    #[error("cannot read experiment file {}: {source}", file.display())]
-    Read {
-        file: PathBuf,
-        source: std::io::Error,
-    },
-    #[error("{}: {message}", file.display())]
-    Parse { file: PathBuf, message: String },
-    #[error("{}: {field}: {message}", file.display())]
-    Invalid {
-        file: PathBuf,
-        field: String,
-        message: String,
-    },
-    #[error("cannot write {}: {source}", path.display())]
-    Write {
-        path: PathBuf,
-        source: std::io::Error,
-    },
+    #[error(transparent)]
+    Config(#[from] crate::config_error::ConfigError),
     #[error("generating the robot with curvature {curvature_per_r}: {source}")]
     Urdf {
         curvature_per_r: f64,
@@ -82,8 +66,8 @@ pub enum ExperimentError {
 pub struct ExperimentOptions {
     /// Output folder; default `out/experiments/<name>-<YYYYmmdd-HHMMSS>` ([`default_out_dir`]).
     pub out_dir: Option<PathBuf>,
-    /// Show progress bars (over the runs, and the current run's simulated time) on stderr.
-    pub progress: bool,
+    /// Where the experiment reports its runs and the current run's simulated time.
+    pub progress: Progress,
     /// Set (e.g. by a Ctrl-C handler) to stop the current run after its frame and skip the
     /// rest; everything so far is written.
     pub stop: Option<Arc<AtomicBool>>,
@@ -148,17 +132,17 @@ pub fn run_experiment(
         .unwrap_or_else(|| default_out_dir(&cfg.name));
     let write_error = |path: &Path| {
         let path = path.to_path_buf();
-        move |source| ExperimentError::Write { path, source }
+        move |source| ExperimentError::from(crate::config_error::ConfigError::write(&path, source))
     };
     std::fs::create_dir_all(&out).map_err(write_error(&out))?;
     for &k in &cfg.curvatures_per_r {
         let urdf = urdf_path(&out, k);
-        crate::robot::write_hexapod_urdf(&experiment.urdf_args(k, &urdf).params(), &urdf).map_err(
-            |source| ExperimentError::Urdf {
+        crate::robot::write_hexapod_urdf(&experiment.robot_params(k), &urdf).map_err(|source| {
+            ExperimentError::Urdf {
                 curvature_per_r: k,
                 source,
-            },
-        )?;
+            }
+        })?;
     }
 
     let csv_path = out.join(RESULTS_CSV);
@@ -198,7 +182,8 @@ pub fn run_experiment(
     };
 
     let durations_s: Vec<f64> = runs.iter().map(|r| r.duration_s).collect();
-    let progress = RunsProgress::new(opts.progress, &durations_s);
+    let progress = &opts.progress;
+    progress.plan(&durations_s);
     let wall = Instant::now();
     let stopped = || {
         opts.stop
@@ -208,7 +193,7 @@ pub fn run_experiment(
     for spec in &runs {
         let previous = kept.iter().position(|r| r.run == spec.name);
         let result = if let Some(i) = previous {
-            progress.skip(
+            progress.skip_run(
                 spec.duration_s,
                 &format!("{}: kept from the earlier attempt", spec.name),
             );
@@ -221,9 +206,9 @@ pub fn run_experiment(
                 // A failed or interrupted run of the earlier attempt: run it again.
                 std::fs::remove_dir_all(&bag).map_err(write_error(&bag))?;
             }
-            progress.start(&spec.name, spec.duration_s);
-            let result = run_one(experiment, spec, &out, opts, &progress);
-            progress.finish(spec.duration_s, &finish_line(spec, &result));
+            progress.start_run(&spec.name, Some(spec.duration_s));
+            let result = run_one(experiment, spec, &out, opts);
+            progress.finish_run(spec.duration_s, &finish_line(spec, &result));
             result
         };
         report.failed += usize::from(!result.is_ok());
@@ -231,7 +216,7 @@ pub fn run_experiment(
         report.wall_time_s = wall.elapsed().as_secs_f64();
         write_results(&report)?;
     }
-    progress.clear();
+    progress.done();
 
     let charts = write_speed_chart(&report.runs, &cfg.terrain_models, &cfg.frequencies_hz, &out)?;
     report.files = [csv_path.clone(), json_path.clone()]
@@ -305,15 +290,15 @@ fn run_scene(experiment: &Experiment, spec: &RunSpec, urdf: &Path) -> Result<Sce
 
 /// Follows a run: the progress bar, the robot's mass and its latest metrics.
 struct RunWatch<'a> {
-    progress: &'a RunsProgress,
+    progress: &'a Progress,
     robot_mass_kg: Option<f64>,
     metrics: Option<RobotMetrics>,
     particles: usize,
 }
 
 impl Observer for RunWatch<'_> {
-    fn observe(&mut self, sim: &mut Simulation) -> Result<(), String> {
-        self.progress.advance(sim.time_s());
+    fn observe(&mut self, sim: &mut Simulation) -> Result<(), crate::scene::ObserverError> {
+        self.progress.advance(sim.time_s(), String::new);
         if let Some(robot) = sim.robot() {
             if self.robot_mass_kg.is_none() {
                 self.robot_mass_kg = Some(robot.total_mass_kg());
@@ -331,7 +316,6 @@ fn run_one(
     spec: &RunSpec,
     out: &Path,
     opts: &ExperimentOptions,
-    progress: &RunsProgress,
 ) -> RunResult {
     let cfg = &experiment.config;
     let urdf = urdf_path(out, spec.curvature_per_r);
@@ -351,11 +335,11 @@ fn run_one(
     let run_opts = RunOptions {
         duration_s: Some(spec.duration_s),
         out_dir: Some(out.join("ply").join(&spec.name)),
-        progress: false,
+        progress: Progress::none(),
         stop: opts.stop.clone(),
     };
     let mut watch = RunWatch {
-        progress,
+        progress: &opts.progress,
         robot_mass_kg: None,
         metrics: None,
         particles: 0,

@@ -18,5 +18,5 @@ pub use boundary::{Wall, Walls};
 pub use particles::{NewParticle, Particles};
 pub use sleep::SleepSettings;
 pub use solver::{
-    SimError, Solver, SolverMaterial, SolverSettings, StageTimes, TimeStep, Transfer,
+    SimError, Solver, SolverMaterial, SolverSettings, Stage, StageTimes, TimeStep, Transfer,
 };

@@ -474,6 +474,13 @@ impl HexapodParams {
         p
     }
 
+    /// These parameters with legs of curvature `curvature_per_r` in units of 1/R (R = half
+    /// the chord): 1 = C-leg, -1 = reversed, 0 = straight.
+    pub fn with_curvature(mut self, curvature_per_r: f64) -> Self {
+        self.legs.curvature_per_m = curvature_per_r * self.legs.max_curvature_per_m();
+        self
+    }
+
     /// Body mass (kg): the total less six legs.
     pub fn body_mass_kg(&self) -> f64 {
         self.total_mass_kg - LEG_COUNT as f64 * self.legs.mass_kg()

@@ -184,7 +184,7 @@ fn check_mesh(urdf: &Path, dir: &Path, link: &str, filename: &str) -> Result<(),
     let bytes = std::fs::read(&resolved).map_err(|e| RobotError::io(&resolved, e))?;
     TriMesh::from_stl_bytes(&bytes)
         .map(|_| ())
-        .map_err(mesh_err)
+        .map_err(|e| mesh_err(e.to_string()))
 }
 
 /// The six leg joints exist, are continuous, turn about +y, and hang off the root link.

@@ -3,6 +3,25 @@
 
 use std::path::Path;
 
+/// Why bytes are not a usable STL mesh.
+#[derive(thiserror::Error, Debug)]
+pub enum StlError {
+    #[error(
+        "not an STL file ({bytes} bytes, neither a binary STL nor text starting with 'solid')"
+    )]
+    NotStl { bytes: usize },
+    #[error("ASCII STL is not UTF-8: {0}")]
+    NotUtf8(#[from] std::str::Utf8Error),
+    #[error("line {line}: malformed vertex")]
+    MalformedVertex { line: usize },
+    #[error("{vertices} vertices is not a whole number of triangles")]
+    PartialTriangle { vertices: usize },
+    #[error("STL file has no triangles")]
+    NoTriangles,
+    #[error("STL file has non-finite coordinates")]
+    NonFinite,
+}
+
 /// A triangle mesh, in metres. Triangles wind counter-clockwise seen from outside.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct TriMesh {
@@ -107,22 +126,19 @@ impl TriMesh {
     }
 
     /// Parses an STL file's bytes, binary or ASCII. Vertices are not merged.
-    pub fn from_stl_bytes(bytes: &[u8]) -> Result<Self, String> {
+    pub fn from_stl_bytes(bytes: &[u8]) -> Result<Self, StlError> {
         let mesh = if is_binary_stl(bytes) {
             parse_binary_stl(bytes)
         } else if bytes.trim_ascii_start().starts_with(b"solid") {
             parse_ascii_stl(bytes)?
         } else {
-            return Err(format!(
-                "not an STL file ({} bytes, neither a binary STL nor text starting with 'solid')",
-                bytes.len()
-            ));
+            return Err(StlError::NotStl { bytes: bytes.len() });
         };
         if mesh.triangles.is_empty() {
-            return Err("STL file has no triangles".into());
+            return Err(StlError::NoTriangles);
         }
         if mesh.vertices.iter().flatten().any(|x| !x.is_finite()) {
-            return Err("STL file has non-finite coordinates".into());
+            return Err(StlError::NonFinite);
         }
         Ok(mesh)
     }
@@ -177,8 +193,8 @@ fn parse_binary_stl(bytes: &[u8]) -> TriMesh {
     mesh
 }
 
-fn parse_ascii_stl(bytes: &[u8]) -> Result<TriMesh, String> {
-    let text = std::str::from_utf8(bytes).map_err(|e| format!("ASCII STL is not UTF-8: {e}"))?;
+fn parse_ascii_stl(bytes: &[u8]) -> Result<TriMesh, StlError> {
+    let text = std::str::from_utf8(bytes)?;
     let mut mesh = TriMesh::default();
     for (line_no, line) in text.lines().enumerate() {
         let mut words = line.split_whitespace();
@@ -190,15 +206,14 @@ fn parse_ascii_stl(bytes: &[u8]) -> Result<TriMesh, String> {
             *x = words
                 .next()
                 .and_then(|w| w.parse().ok())
-                .ok_or_else(|| format!("line {}: malformed vertex", line_no + 1))?;
+                .ok_or(StlError::MalformedVertex { line: line_no + 1 })?;
         }
         mesh.vertices.push(v);
     }
     if mesh.vertices.len() % 3 != 0 {
-        return Err(format!(
-            "{} vertices is not a whole number of triangles",
-            mesh.vertices.len()
-        ));
+        return Err(StlError::PartialTriangle {
+            vertices: mesh.vertices.len(),
+        });
     }
     let n = mesh.vertices.len() as u32 / 3;
     mesh.triangles = (0..n).map(|t| [3 * t, 3 * t + 1, 3 * t + 2]).collect();

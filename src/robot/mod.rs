@@ -2,7 +2,7 @@
 //! loading into rapier as a multibody, and the alternating tripod gait on rigid ground.
 //!
 //! - [`geometry`]: legs (arcs of signed curvature), body, hips, mass properties.
-//! - [`urdf_gen`]: `sandstep urdf`, writing `urdf/*.urdf` and `urdf/meshes/*.stl`.
+//! - [`urdf_gen`]: the URDF and leg mesh behind `sandstep urdf` (`urdf/*.urdf`, `urdf/meshes/*.stl`).
 //! - [`loader`]: URDF checks with errors naming file and element.
 //! - [`gait`]: tripod phases and the torque-limited DC motor (pure, no rapier).
 //! - [`sim`]: [`RobotSim`], the rapier world.
@@ -24,4 +24,4 @@ pub use error::RobotError;
 pub use gait::GaitCommand;
 pub use geometry::{HexapodParams, LegParams, LEGS, LEG_COUNT};
 pub use sim::{RobotMetrics, RobotSim, RobotState};
-pub use urdf_gen::{run_urdf_command, write_hexapod_urdf, UrdfArgs};
+pub use urdf_gen::{leg_mesh_path, write_hexapod_urdf};

@@ -8,7 +8,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use ros2_client::{
     Context, MessageTypeName, Name, Node, NodeName, NodeOptions as RosNodeOptions, Server,
     ServiceMapping, ServiceTypeName, Subscription,
@@ -22,6 +21,7 @@ use crate::bag::{BagInfo, BagWriter};
 use crate::msgs::{
     Float64, Float64MultiArray, RosMessage, ServiceResponse, SetBoolRequest, TriggerRequest, Twist,
 };
+use crate::progress::Progress;
 use crate::robot::GaitCommand;
 use crate::scene::config::ServiceMappingConfig;
 use crate::scene::run::RunError;
@@ -51,8 +51,8 @@ pub struct NodeRunOptions {
     pub realtime: bool,
     /// Record into this bag directory; `None` = no bag.
     pub bag_dir: Option<PathBuf>,
-    /// Show progress on stderr.
-    pub progress: bool,
+    /// Where the node reports its simulated time, real-time factor and commands.
+    pub progress: Progress,
     /// Set by Ctrl-C / SIGTERM: stop after the current tick.
     pub stop: Arc<AtomicBool>,
 }
@@ -390,7 +390,8 @@ fn run_loop(
     opts: &NodeRunOptions,
 ) -> Result<(), NodeError> {
     let period_s = 1.0 / session.scene.config.node.state_rate_hz;
-    let bar = node_progress(opts);
+    let progress = &opts.progress;
+    progress.start_run(&session.summary.node, opts.duration_s);
     session.publishing.publish_static(&session.sim)?;
     session.publishing.publish_due(&mut session.sim)?;
     let start = Instant::now();
@@ -421,10 +422,7 @@ fn run_loop(
         if let Some(d) = opts.duration_s {
             target = target.min(d - session.publishing.time_offset_s);
         }
-        session
-            .sim
-            .advance_to(target)
-            .inspect_err(|_| bar.abandon())?;
+        session.sim.advance_to(target)?;
         session.publishing.publish_due(&mut session.sim)?;
         if opts.realtime {
             let ahead = (session.now_s() - pace_origin.1) - pace_origin.0.elapsed().as_secs_f64();
@@ -437,48 +435,20 @@ fn run_loop(
         if last_progress.elapsed() >= PROGRESS_INTERVAL {
             last_progress = Instant::now();
             let cmd = session.commands.current();
-            bar.set_position((session.now_s() * 1000.0) as u64);
-            bar.set_message(format!(
-                "real-time factor {:.3}, gait {:.2} Hz, {} commands",
-                running_sim_s / running_wall_s.max(1e-9),
-                cmd.frequency_hz,
-                session.summary.commands_received
-            ));
+            progress.advance(session.now_s(), || {
+                format!(
+                    "real-time factor {:.3}, gait {:.2} Hz, {} commands",
+                    running_sim_s / running_wall_s.max(1e-9),
+                    cmd.frequency_hz,
+                    session.summary.commands_received
+                )
+            });
         }
     }
-    bar.finish_and_clear();
+    progress.done();
     let s = &mut session.summary;
     s.sim_time_s = session.publishing.time_offset_s + session.sim.time_s();
     s.wall_time_s = start.elapsed().as_secs_f64();
     s.real_time_factor = running_sim_s / running_wall_s.max(1e-9);
     Ok(())
-}
-
-fn node_progress(opts: &NodeRunOptions) -> ProgressBar {
-    let target = if opts.progress {
-        ProgressDrawTarget::stderr()
-    } else {
-        ProgressDrawTarget::hidden()
-    };
-    match opts.duration_s {
-        Some(d) => {
-            let bar = ProgressBar::with_draw_target(Some((d * 1000.0) as u64), target);
-            bar.set_style(
-                ProgressStyle::with_template(
-                    "{elapsed_precise} [{bar:40}] {pos}/{len} ms sim ({msg})",
-                )
-                .expect("valid template")
-                .progress_chars("=> "),
-            );
-            bar
-        }
-        None => {
-            let bar = ProgressBar::with_draw_target(None, target);
-            bar.set_style(
-                ProgressStyle::with_template("{elapsed_precise} {pos} ms sim ({msg})")
-                    .expect("valid template"),
-            );
-            bar
-        }
-    }
 }

@@ -363,11 +363,11 @@ fn next_due(due: f64, period: f64, now: f64) -> f64 {
 
 /// Records `sandstep run` into a bag: an [`Observer`] publishing to the bag only.
 impl Observer for Publishing {
-    fn observe(&mut self, sim: &mut Simulation) -> Result<(), String> {
+    fn observe(&mut self, sim: &mut Simulation) -> Result<(), crate::scene::ObserverError> {
         if sim.time_s() == 0.0 {
-            self.publish_static(sim).map_err(|e| e.to_string())?;
+            self.publish_static(sim)?;
         }
-        self.publish_due(sim).map_err(|e| e.to_string())
+        Ok(self.publish_due(sim)?)
     }
 }
 

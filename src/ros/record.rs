@@ -60,7 +60,10 @@ impl RecordError {
 struct Both<'a>(&'a mut dyn Observer, &'a mut dyn Observer);
 
 impl Observer for Both<'_> {
-    fn observe(&mut self, sim: &mut crate::scene::Simulation) -> Result<(), String> {
+    fn observe(
+        &mut self,
+        sim: &mut crate::scene::Simulation,
+    ) -> Result<(), crate::scene::ObserverError> {
         self.0.observe(sim)?;
         self.1.observe(sim)
     }

@@ -30,7 +30,15 @@ pub fn validate(scene: &Scene) -> Result<(), SceneError> {
         robot.validate(&scene.file)?;
     }
     validate_node(scene)?;
-    super::terrain::validate(scene)?;
+    let materials: Option<Vec<&str>> = scene
+        .sand()
+        .map(|s| s.materials.keys().map(String::as_str).collect());
+    c.terrain
+        .validate(
+            c.robot.as_ref().map(|r| r.ground.height_m),
+            materials.as_deref(),
+        )
+        .map_err(|e| SceneError::from(e.in_file(&scene.file)))?;
     if !(c.coupling.friction >= 0.0 && c.coupling.friction.is_finite()) {
         return Err(scene.invalid(
             "coupling.friction",

@@ -37,7 +37,7 @@ pub struct SceneConfig {
     /// What the robot walks on: the MPM `sand` (default) or resistive force theory
     /// (`docs/scenes.md`, `docs/physics.md`).
     #[serde(default)]
-    pub terrain: super::terrain::TerrainConfig,
+    pub terrain: crate::terrain::TerrainConfig,
 }
 
 fn default_gravity() -> [f32; 3] {

@@ -2,39 +2,30 @@
 
 pub mod bed;
 pub mod build;
-pub mod calibrate_rft;
+pub mod calibration_bed;
 pub mod config;
+pub mod error;
 pub(crate) mod overrides;
 pub mod ply;
-pub mod progress;
 pub mod robot_sand;
 pub mod run;
 pub mod sand_window;
 pub mod simulation;
-pub mod terrain;
 
 use std::path::{Path, PathBuf};
 
+use crate::config_error::ConfigError;
+
 pub use config::SceneConfig;
+pub use error::{ObserverError, RunError};
 pub use run::{run_scene, run_scene_observed, NoObserver, Observer, RunOptions, RunSummary};
-pub use simulation::{LegWrench, LinkPose, Simulation};
+pub use simulation::{LegWrench, LinkPose, Simulation, Terrain};
 
 /// A scene that cannot be loaded or built; names the file and the field.
 #[derive(thiserror::Error, Debug)]
 pub enum SceneError {
-    #[error("cannot read scene file {}: {source}", file.display())]
-    Read {
-        file: PathBuf,
-        source: std::io::Error,
-    },
-    #[error("{}: {message}", file.display())]
-    Parse { file: PathBuf, message: String },
-    #[error("{}: {field}: {message}", file.display())]
-    Invalid {
-        file: PathBuf,
-        field: String,
-        message: String,
-    },
+    #[error(transparent)]
+    Config(#[from] ConfigError),
     #[error(transparent)]
     Robot(#[from] crate::robot::RobotError),
     #[error("--set {assignment}: {message}")]
@@ -51,10 +42,7 @@ pub struct Scene {
 impl Scene {
     /// Reads, parses (unknown keys are errors) and validates a scene file.
     pub fn load(file: &Path, overrides: &[String]) -> Result<Scene, SceneError> {
-        let text = std::fs::read_to_string(file).map_err(|source| SceneError::Read {
-            file: file.to_path_buf(),
-            source,
-        })?;
+        let text = ConfigError::read("scene", file)?;
         Self::from_yaml(&text, file, overrides)
     }
 
@@ -62,10 +50,11 @@ impl Scene {
     pub fn from_yaml(text: &str, file: &Path, overrides: &[String]) -> Result<Scene, SceneError> {
         let config: SceneConfig =
             overrides::deserialize_with_overrides(text, overrides).map_err(|e| match e {
-                overrides::YamlProblem::Parse(message) => SceneError::Parse {
+                overrides::YamlProblem::Parse(message) => ConfigError::Parse {
                     file: file.to_path_buf(),
                     message,
-                },
+                }
+                .into(),
                 overrides::YamlProblem::Override(e) => e,
             })?;
         let scene = Scene {
@@ -77,11 +66,12 @@ impl Scene {
     }
 
     fn invalid(&self, field: impl Into<String>, message: impl Into<String>) -> SceneError {
-        SceneError::Invalid {
+        ConfigError::Invalid {
             file: self.file.clone(),
             field: field.into(),
             message: message.into(),
         }
+        .into()
     }
 
     /// Checks every value's range and every cross-reference.

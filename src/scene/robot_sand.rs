@@ -23,10 +23,10 @@ pub fn robot_coupling(
     let mut colliders = Vec::new();
     for (name, body, mode) in parts {
         let surfaces =
-            body_surfaces(body, &world.bodies, &world.colliders, dx).map_err(|message| {
+            body_surfaces(body, &world.bodies, &world.colliders, dx).map_err(|source| {
                 CouplingError::Surface {
                     name: name.clone(),
-                    message,
+                    source,
                 }
             })?;
         for (pose, surface) in surfaces {

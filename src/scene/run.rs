@@ -5,15 +5,15 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
 use serde_json::{json, Map, Value};
 
+pub use super::error::{ObserverError, RunError};
 use super::simulation::Simulation;
 use super::Scene;
 use crate::analysis::collapse::{self, CollapseGeometry};
-use crate::mpm::SimError;
-use crate::robot::{RobotError, RobotSim};
+use crate::progress::Progress;
+use crate::robot::RobotSim;
 
 /// How to run a scene.
 #[derive(Clone, Debug, Default)]
@@ -22,8 +22,8 @@ pub struct RunOptions {
     pub duration_s: Option<f64>,
     /// Directory for snapshots; default `out/<scene name>`.
     pub out_dir: Option<PathBuf>,
-    /// Show a progress bar on stderr.
-    pub progress: bool,
+    /// Where the run reports its simulated time after every frame.
+    pub progress: Progress,
     /// Set (e.g. by a Ctrl-C handler) to stop after the current frame; the summary then covers
     /// the time simulated so far.
     pub stop: Option<Arc<AtomicBool>>,
@@ -51,47 +51,17 @@ pub struct RunSummary {
     pub state_digest: String,
 }
 
-#[derive(thiserror::Error, Debug)]
-pub enum RunError {
-    #[error(transparent)]
-    Sim(#[from] SimError),
-    #[error("cannot write {}: {source}", path.display())]
-    Write {
-        path: PathBuf,
-        source: std::io::Error,
-    },
-    #[error(transparent)]
-    Robot(#[from] RobotError),
-    #[error("scene {0} has nothing to simulate (no `sand` or `robot` section)")]
-    Empty(String),
-    #[error(transparent)]
-    Coupling(#[from] crate::coupling::CouplingError),
-    #[error(transparent)]
-    Rft(#[from] crate::coupling::rft::RftError),
-    #[error(
-        "the robot blew up at t = {time_s:.6} s: body at {position_m:?} m moving at {speed_m_s:.3e} m/s; \
-         reduce robot.physics.max_dt_s or check the URDF's masses and inertias"
-    )]
-    RobotBlowUp {
-        time_s: f64,
-        position_m: [f32; 3],
-        speed_m_s: f64,
-    },
-    #[error("recording at t = {time_s:.6} s: {message}")]
-    Observer { time_s: f64, message: String },
-}
-
 /// Something that looks at the simulation at every frame (and at time 0), e.g. a bag recorder.
 pub trait Observer {
     /// Called after each frame; an error stops the run.
-    fn observe(&mut self, sim: &mut Simulation) -> Result<(), String>;
+    fn observe(&mut self, sim: &mut Simulation) -> Result<(), ObserverError>;
 }
 
 /// Observes nothing.
 pub struct NoObserver;
 
 impl Observer for NoObserver {
-    fn observe(&mut self, _: &mut Simulation) -> Result<(), String> {
+    fn observe(&mut self, _: &mut Simulation) -> Result<(), ObserverError> {
         Ok(())
     }
 }
@@ -136,14 +106,15 @@ pub fn run_scene_observed(
         write_snapshot(&out_dir, 0, &sim)?;
     }
     let observe = |sim: &mut Simulation, observer: &mut dyn Observer| {
-        observer.observe(sim).map_err(|message| RunError::Observer {
+        observer.observe(sim).map_err(|source| RunError::Observer {
             time_s: sim.time_s(),
-            message,
+            source,
         })
     };
     observe(&mut sim, observer)?;
 
-    let bar = progress_bar(opts.progress, duration);
+    let progress = &opts.progress;
+    progress.start_run(&config.name, Some(duration));
     let wall = Instant::now();
     let (mut sinkage_sum, mut frames_done) = (0.0f64, 0u64);
     let mut stopped_early = false;
@@ -157,23 +128,19 @@ pub fn run_scene_observed(
             break;
         }
         let target = (frame as f64 * frame_interval).min(duration);
-        sim.advance_to(target).inspect_err(|_| bar.abandon())?;
+        sim.advance_to(target)?;
         frames_done += 1;
         sinkage_sum += sim.leg_sinkage_m().unwrap_or(0.0);
-        bar.set_position((target * 1000.0) as u64);
-        if let Some(solver) = sim.solver() {
-            bar.set_message(format!(
-                "step {} dt {:.2e} s",
-                solver.steps,
-                solver.next_dt()
-            ));
-        }
+        progress.advance(target, || match sim.solver() {
+            Some(solver) => format!("step {} dt {:.2e} s", solver.steps, solver.next_dt()),
+            None => format!("step {}", sim.steps()),
+        });
         if snapshots && frame % ply_every == 0 {
             write_snapshot(&out_dir, frame, &sim)?;
         }
-        observe(&mut sim, observer).inspect_err(|_| bar.abandon())?;
+        observe(&mut sim, observer)?;
     }
-    bar.finish_and_clear();
+    progress.done();
     let wall_time_s = wall.elapsed().as_secs_f64();
 
     let mut metrics = Map::new();
@@ -311,23 +278,4 @@ fn robot_metrics_json(robot: &RobotSim) -> Map<String, Value> {
         Value::Object(map) => map,
         _ => unreachable!("metrics serialise as a map"),
     }
-}
-
-pub(super) fn progress_bar(visible: bool, duration_s: f64) -> ProgressBar {
-    let bar = ProgressBar::with_draw_target(
-        Some((duration_s * 1000.0) as u64),
-        if visible {
-            ProgressDrawTarget::stderr()
-        } else {
-            ProgressDrawTarget::hidden()
-        },
-    );
-    bar.set_style(
-        ProgressStyle::with_template(
-            "{elapsed_precise} [{bar:40}] {pos}/{len} ms sim, eta {eta} ({msg})",
-        )
-        .expect("valid template")
-        .progress_chars("=> "),
-    );
-    bar
 }

@@ -10,9 +10,9 @@ use plotters::prelude::*;
 
 use super::SettingResult;
 use crate::analysis::plots::{
-    line_style, register_fonts, PlotError, AXIS_DESC_FONT_SIZE, CAPTION_FONT_SIZE, LABEL_FONT_SIZE,
-    LEGEND_BACKGROUND_OPACITY, MARGIN_PX, MARKER_RADIUS_PX, PLOT_SIZE, X_LABEL_AREA_PX,
-    Y_LABEL_AREA_PX,
+    line_style, register_fonts, DrawError, PlotError, AXIS_DESC_FONT_SIZE, CAPTION_FONT_SIZE,
+    LABEL_FONT_SIZE, LEGEND_BACKGROUND_OPACITY, MARGIN_PX, MARKER_RADIUS_PX, PLOT_SIZE,
+    X_LABEL_AREA_PX, Y_LABEL_AREA_PX,
 };
 
 /// Factor by which a log axis extends beyond its data on each side.
@@ -102,9 +102,9 @@ pub fn write_pareto_chart(
                 note,
             )
         };
-        drawn.map_err(|message| PlotError::Draw {
+        drawn.map_err(|source| PlotError::Draw {
             path: path.clone(),
-            message,
+            source,
         })?;
         files.push(path);
     }
@@ -117,8 +117,8 @@ fn draw<DB: DrawingBackend>(
     pts: &[Point],
     y_desc: &str,
     note: &str,
-) -> Result<(), String> {
-    let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+) -> Result<(), DrawError> {
+    let e = DrawError::from;
     root.fill(&WHITE).map_err(e)?;
     let mut chart = ChartBuilder::on(root)
         .caption(
@@ -182,5 +182,5 @@ fn draw<DB: DrawingBackend>(
         .border_style(BLACK)
         .draw()
         .map_err(e)?;
-    root.present().map_err(|e| e.to_string())
+    Ok(root.present()?)
 }

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::SweepError;
+use crate::config_error::ConfigError;
 use crate::experiment::config::{check_output_name, GaitWindow};
 use crate::scene::overrides::{deserialize_with_overrides, YamlProblem};
 use crate::scene::Scene;
@@ -198,17 +199,14 @@ fn scalar_text(value: &serde_yaml_ng::Value) -> String {
 impl Sweep {
     /// Reads, parses and checks a sweep file, loading every setting's scene.
     pub fn load(file: &Path) -> Result<Self, SweepError> {
-        let text = std::fs::read_to_string(file).map_err(|source| SweepError::Read {
-            file: file.to_path_buf(),
-            source,
-        })?;
+        let text = ConfigError::read("sweep", file)?;
         Self::from_yaml(&text, file)
     }
 
     /// Parses sweep text; `file` names the source in errors.
     pub fn from_yaml(text: &str, file: &Path) -> Result<Self, SweepError> {
         let config: SweepConfig =
-            deserialize_with_overrides(text, &[]).map_err(|e| SweepError::Parse {
+            deserialize_with_overrides(text, &[]).map_err(|e| ConfigError::Parse {
                 file: file.to_path_buf(),
                 message: match e {
                     YamlProblem::Parse(message) => message,
@@ -225,11 +223,12 @@ impl Sweep {
     }
 
     fn invalid(&self, field: impl Into<String>, message: impl Into<String>) -> SweepError {
-        SweepError::Invalid {
+        ConfigError::Invalid {
             file: self.file.clone(),
             field: field.into(),
             message: message.into(),
         }
+        .into()
     }
 
     /// Only the studies named in `names` (all if empty); an unknown name is an error.
@@ -293,14 +292,14 @@ impl Sweep {
     #[allow(clippy::neg_cmp_op_on_partial_ord)]
     fn expand(&self) -> Result<Vec<Setting>, SweepError> {
         let c = &self.config;
-        check_output_name(&c.name).map_err(|m| self.invalid("name", m))?;
+        check_output_name(&c.name).map_err(|e| self.invalid("name", e.to_string()))?;
         if c.studies.is_empty() {
             return Err(self.invalid("studies", "needs at least one study"));
         }
         let mut settings = Vec::new();
         for (i, study) in c.studies.iter().enumerate() {
             let at = |field: &str| format!("studies.{i}.{field}");
-            check_output_name(&study.name).map_err(|m| self.invalid(at("name"), m))?;
+            check_output_name(&study.name).map_err(|e| self.invalid(at("name"), e.to_string()))?;
             if c.studies[..i].iter().any(|s| s.name == study.name) {
                 return Err(self.invalid(at("name"), format!("'{}' names two studies", study.name)));
             }
@@ -374,7 +373,7 @@ impl Sweep {
             }
             for (n, named) in study.settings.iter().enumerate() {
                 check_output_name(&named.name)
-                    .map_err(|m| self.invalid(at(&format!("settings.{n}.name")), m))?;
+                    .map_err(|e| self.invalid(at(&format!("settings.{n}.name")), e.to_string()))?;
                 candidates.push((
                     named.name.clone(),
                     named.overrides.clone(),

@@ -25,7 +25,7 @@ pub use config::{Quantity, Setting, Sweep, SweepConfig};
 use crate::analysis::plots::PlotError;
 use crate::experiment::config::GaitWindow;
 use crate::experiment::results::csv_table;
-use crate::scene::progress::RunsProgress;
+use crate::progress::Progress;
 use crate::scene::{run_scene_observed, Observer, RunOptions, Simulation};
 
 /// Parent of the default output folders.
@@ -64,24 +64,8 @@ pub const CSV_COLUMNS: [&str; 17] = [
 /// Why a sweep could not be run at all (a failing setting is not an error: it is recorded).
 #[derive(thiserror::Error, Debug)]
 pub enum SweepError {
-    #[error("cannot read sweep file {}: {source}", file.display())]
-    Read {
-        file: PathBuf,
-        source: std::io::Error,
-    },
-    #[error("{}: {message}", file.display())]
-    Parse { file: PathBuf, message: String },
-    #[error("{}: {field}: {message}", file.display())]
-    Invalid {
-        file: PathBuf,
-        field: String,
-        message: String,
-    },
-    #[error("cannot write {}: {source}", path.display())]
-    Write {
-        path: PathBuf,
-        source: std::io::Error,
-    },
+    #[error(transparent)]
+    Config(#[from] crate::config_error::ConfigError),
     #[error("drawing a chart: {0}")]
     Plot(#[from] PlotError),
 }
@@ -91,8 +75,8 @@ pub enum SweepError {
 pub struct SweepOptions {
     /// Output folder; default `out/sweeps/<name>-<YYYYmmdd-HHMMSS>`.
     pub out_dir: Option<PathBuf>,
-    /// Show progress bars (over the settings, and the current run's simulated time) on stderr.
-    pub progress: bool,
+    /// Where the sweep reports its settings and the current run's simulated time.
+    pub progress: Progress,
     /// Set (e.g. by a Ctrl-C handler) to stop the current run after its frame and skip the
     /// rest; everything so far is written.
     pub stop: Option<Arc<AtomicBool>>,
@@ -284,7 +268,7 @@ pub fn run_sweep(sweep: &Sweep, opts: &SweepOptions) -> Result<SweepReport, Swee
         .unwrap_or_else(|| default_out_dir(&cfg.name));
     let write_error = |path: &Path| {
         let path = path.to_path_buf();
-        move |source| SweepError::Write { path, source }
+        move |source| SweepError::from(crate::config_error::ConfigError::write(&path, source))
     };
     std::fs::create_dir_all(&out).map_err(write_error(&out))?;
     let csv_path = out.join(RESULTS_CSV);
@@ -312,7 +296,8 @@ pub fn run_sweep(sweep: &Sweep, opts: &SweepOptions) -> Result<SweepReport, Swee
         .iter()
         .map(|s| s.duration_s * s.runs() as f64)
         .collect();
-    let progress = RunsProgress::new(opts.progress, &durations_s);
+    let progress = &opts.progress;
+    progress.plan(&durations_s);
     let wall = Instant::now();
     for (index, setting) in sweep.settings.iter().enumerate() {
         let study = &cfg.studies[setting.study];
@@ -327,16 +312,16 @@ pub fn run_sweep(sweep: &Sweep, opts: &SweepOptions) -> Result<SweepReport, Swee
                 ..blank_result(sweep, setting)
             }
         } else {
-            progress.start(&label, setting.duration_s * setting.runs() as f64);
+            progress.start_run(&label, Some(setting.duration_s * setting.runs() as f64));
             let ply_dir = out.join("ply").join(format!("{index:03}"));
-            run_setting(sweep, setting, ply_dir, opts, &progress)
+            run_setting(sweep, setting, ply_dir, opts)
         };
         report.failed += usize::from(!result.is_ok());
         report.results.push(result);
         score(&mut report.results);
         if !stopped {
             let scored = report.results.last().expect("just pushed");
-            progress.finish(
+            progress.finish_run(
                 setting.duration_s * setting.runs() as f64,
                 &finish_line(&label, scored),
             );
@@ -344,7 +329,7 @@ pub fn run_sweep(sweep: &Sweep, opts: &SweepOptions) -> Result<SweepReport, Swee
         report.wall_time_s = wall.elapsed().as_secs_f64();
         write_results(&report)?;
     }
-    progress.clear();
+    progress.done();
 
     let mut files = vec![csv_path.clone(), json_path.clone()];
     for study in &cfg.studies {
@@ -390,7 +375,7 @@ fn blank_result(sweep: &Sweep, setting: &Setting) -> SettingResult {
 /// Follows a run: the progress bar, and the robot's x position at the window's start and at
 /// the latest frame.
 struct Measure<'a> {
-    progress: &'a RunsProgress,
+    progress: &'a Progress,
     /// Simulated time of the setting's earlier starts (s), for the progress bar.
     progress_offset_s: f64,
     window: Option<GaitWindow>,
@@ -401,9 +386,10 @@ struct Measure<'a> {
 }
 
 impl Observer for Measure<'_> {
-    fn observe(&mut self, sim: &mut Simulation) -> Result<(), String> {
+    fn observe(&mut self, sim: &mut Simulation) -> Result<(), crate::scene::ObserverError> {
         let time_s = sim.time_s();
-        self.progress.advance(self.progress_offset_s + time_s);
+        self.progress
+            .advance(self.progress_offset_s + time_s, String::new);
         if let (Some(window), Some(robot)) = (self.window, sim.robot()) {
             let x = robot.metrics().final_position_m[0];
             if self.start.is_none() && time_s >= window.from_s - WINDOW_TIME_TOLERANCE_S {
@@ -438,7 +424,6 @@ fn run_setting(
     setting: &Setting,
     ply_dir: PathBuf,
     opts: &SweepOptions,
-    progress: &RunsProgress,
 ) -> SettingResult {
     let mut result = blank_result(sweep, setting);
     let (mut wall_time_s, mut sim_time_s, mut substeps) = (0.0, 0.0, 0);
@@ -454,11 +439,11 @@ fn run_setting(
         let run_opts = RunOptions {
             duration_s: Some(setting.duration_s),
             out_dir: Some(ply_dir.join(format!("start{run}"))),
-            progress: false,
+            progress: Progress::none(),
             stop: opts.stop.clone(),
         };
         let mut measure = Measure {
-            progress,
+            progress: &opts.progress,
             progress_offset_s: run as f64 * setting.duration_s,
             window: setting.window,
             start: None,

@@ -22,7 +22,6 @@ use crate::bag::{BagError, BagReader, TopicInfo};
 use crate::msgs::{self, MessageType, RosMessage, Time};
 
 pub use cycles::{cycle_boundaries, GaitCycle};
-pub use report::run_analyze_command;
 
 use tf::{pose_at, pose_to_isometry, sort_samples, transform_to_isometry, TfTree, TimedPose};
 
@@ -231,7 +230,7 @@ pub struct BagSummary {
     pub commands: BTreeMap<String, CommandSummary>,
     /// Every topic of the bag, sorted by name.
     pub topics: Vec<TopicSummary>,
-    /// Plot files written (filled by [`run_analyze_command`] with `--plots`).
+    /// Plot files written (filled by `sandstep analyze --plots`).
     pub plots: Vec<String>,
     /// What was left out and why (missing optional inputs, unreadable URDF, ...).
     pub notes: Vec<String>,

@@ -1,12 +1,7 @@
-//! The human-readable summary and the `sandstep analyze` command.
+//! The human-readable summary of a bag's analysis (`sandstep analyze`).
 
+use super::BagSummary;
 use std::fmt;
-use std::path::Path;
-
-use anyhow::Context;
-
-use super::{analyze_bag_with, AnalysisOptions, BagSummary};
-use crate::analysis::plots::write_plots;
 
 /// Metres shown as millimetres in the human summary.
 const MM_PER_M: f64 = 1e3;
@@ -108,33 +103,4 @@ impl fmt::Display for BagSummary {
         }
         Ok(())
     }
-}
-
-/// `sandstep analyze`: analyses `bag` (from `opts.start_s` on), writes plots into `plots_dir`
-/// if given, and prints the summary (one JSON object with `json`).
-pub fn run_analyze_command(
-    bag: &Path,
-    opts: &AnalysisOptions,
-    plots_dir: Option<&Path>,
-    json: bool,
-) -> anyhow::Result<()> {
-    let analysis =
-        analyze_bag_with(bag, opts).with_context(|| format!("analysing {}", bag.display()))?;
-    let mut summary = analysis.summary.clone();
-    if let Some(dir) = plots_dir {
-        let written = write_plots(&analysis, dir)
-            .with_context(|| format!("writing plots into {}", dir.display()))?;
-        summary.plots = written
-            .files
-            .iter()
-            .map(|p| p.display().to_string())
-            .collect();
-        summary.notes.extend(written.notes);
-    }
-    if json {
-        println!("{}", serde_json::to_string(&summary)?);
-    } else {
-        print!("{summary}");
-    }
-    Ok(())
 }

@@ -27,8 +27,10 @@ pub struct LinkGeometry {
 
 /// The collision geometry of the links moved by non-fixed joints (the legs), in the order of
 /// their joints, and notes on what was left out (mesh geometry cannot be measured here).
-pub fn moving_link_geometry(urdf_text: &str) -> Result<(Vec<LinkGeometry>, Vec<String>), String> {
-    let robot = urdf_rs::read_from_string(urdf_text).map_err(|e| e.to_string())?;
+pub fn moving_link_geometry(
+    urdf_text: &str,
+) -> Result<(Vec<LinkGeometry>, Vec<String>), urdf_rs::UrdfError> {
+    let robot = urdf_rs::read_from_string(urdf_text)?;
     let mut notes = Vec::new();
     let mut links = Vec::new();
     for joint in &robot.joints {

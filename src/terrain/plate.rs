@@ -1,13 +1,13 @@
 //! A horizontal plate pressed into sand at constant speed through CPIC: the intrusion test of
-//! `tests/coupling.rs` and the measurement behind `sandstep calibrate-rft` (resistive force
-//! theory, `docs/physics.md`). The plate is a thin box whose mid-plane is a CPIC sheet, moved
+//! `tests/coupling.rs` and the measurement behind `sandstep calibrate-rft` ([`super::calibration`],
+//! `docs/physics.md`). The plate is a thin box whose mid-plane is a CPIC sheet, moved
 //! kinematically (one-way: the sand feels it, it records what it would feel).
 
 use rapier3d::glamx::Vec3;
 use rapier3d::prelude::{Pose, RigidBodyBuilder, RigidBodySet};
 use serde::Serialize;
 
-use super::{Coupling, CouplingMode, CpicSurface, SandCollider};
+use crate::coupling::{Coupling, CouplingMode, CpicSurface, SandCollider};
 use crate::mpm::{SimError, Solver};
 
 /// How the plate is pressed.

@@ -75,7 +75,9 @@ use rapier3d::prelude::{
     ColliderSet, MultibodyIndex, MultibodyJointSet, Pose, RigidBody, RigidBodyHandle, RigidBodySet,
 };
 
-use super::{body_surfaces, CpicSurface};
+use super::config::{RftConfig, RftParams};
+use crate::coupling::{body_surfaces, CpicSurface, SurfaceError};
+use crate::robot::{RobotSim, LEGS};
 
 /// Generic coefficients of the RFT stress functions per unit zeta (Li, Zhang and Goldman
 /// 2013, supplement: the fit shared by their granular media up to the scale factor zeta).
@@ -153,22 +155,6 @@ pub fn alpha(beta_rad: f64, gamma_rad: f64) -> (f64, f64) {
         let (x, z) = alpha_fitted(-beta_rad, PI.copysign(gamma) - gamma);
         (-x, z)
     }
-}
-
-/// The RFT medium and how bodies are discretised.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct RftParams {
-    /// Medium scale zeta: vertical stress per unit depth under a horizontal plate pressed
-    /// straight down (N/m^3), > 0.
-    pub zeta_n_m3: f64,
-    /// Height of the flat free surface (m): depth is measured from it.
-    pub surface_height_m: f64,
-    /// Longest edge of a surface element (m), > 0; also the thickness below which a box is a
-    /// thin plate.
-    pub element_size_m: f64,
-    /// Regularisation speed v_ref (m/s), > 0: an element slower than this feels the fraction
-    /// `|v| / v_ref` of its RFT force.
-    pub reference_speed_m_s: f64,
 }
 
 /// One surface element of a body, in the body's frame (the rapier body's position, not its
@@ -271,17 +257,14 @@ pub fn body_elements(
     bodies: &RigidBodySet,
     colliders: &ColliderSet,
     element_size_m: f64,
-) -> Result<Vec<SurfaceElement>, String> {
+) -> Result<Vec<SurfaceElement>, ElementsError> {
     let mut elements = Vec::new();
     for (pose, surface) in body_surfaces(body, bodies, colliders, element_size_m as f32)? {
         match surface {
             CpicSurface::Solid(shape) => {
-                let cuboid = shape.as_cuboid().ok_or_else(|| {
-                    format!(
-                        "RFT needs box collision shapes; found a {:?}",
-                        shape.shape_type()
-                    )
-                })?;
+                let cuboid = shape
+                    .as_cuboid()
+                    .ok_or_else(|| ElementsError::NotABox(format!("{:?}", shape.shape_type())))?;
                 box_faces(&pose, cuboid.half_extents, element_size_m, &mut elements);
             }
             CpicSurface::Sheet(sheet) => {
@@ -404,8 +387,18 @@ fn add_point_depth_spring(stiffness: &mut Matrix6<f64>, k: f64, r: Vector3<f64>)
 pub enum RftError {
     #[error("{name}: its body is not in the rapier world")]
     MissingBody { name: String },
-    #[error("{name}: cannot make its RFT surface elements: {message}")]
-    Elements { name: String, message: String },
+    #[error("{name}: cannot make its RFT surface elements: {source}")]
+    Elements { name: String, source: ElementsError },
+}
+
+/// Why a body's colliders give no RFT surface elements.
+#[derive(thiserror::Error, Debug, Clone, PartialEq)]
+pub enum ElementsError {
+    #[error(transparent)]
+    Surface(#[from] SurfaceError),
+    /// The shape type's name.
+    #[error("RFT needs box collision shapes; found a {0}")]
+    NotABox(String),
 }
 
 /// The implicit terms of one multibody's links in the terrain: (link id, 6x6 `dt C + dt^2 K`
@@ -472,9 +465,9 @@ impl RftTerrain {
                 return Err(RftError::MissingBody { name });
             }
             let elements = body_elements(body, bodies, colliders, params.element_size_m).map_err(
-                |message| RftError::Elements {
+                |source| RftError::Elements {
                     name: name.clone(),
-                    message,
+                    source,
                 },
             )?;
             let reach_m = elements
@@ -622,6 +615,18 @@ impl RftTerrain {
         }
         wrenches
     }
+}
+
+/// The RFT terrain acting on the robot's body and legs (every collision box; the legs' thin
+/// boxes as plates), in the order body, then [`LEGS`].
+pub fn robot_terrain(robot: &RobotSim, cfg: &RftConfig) -> Result<RftTerrain, RftError> {
+    let parts = std::iter::once(("body".to_string(), robot.body_handle())).chain(
+        LEGS.iter()
+            .zip(robot.leg_handles())
+            .map(|(leg, h)| (leg.link_name(), h)),
+    );
+    let world = robot.world();
+    RftTerrain::new(cfg.params(), parts, &world.bodies, &world.colliders)
 }
 
 #[cfg(test)]

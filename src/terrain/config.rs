@@ -1,15 +1,14 @@
 //! The `terrain:` section of a scene: what the robot walks on. `model: mpm` (the default) is
 //! the MPM sand of the `sand` section, coupled by CPIC; `model: rft` is resistive force theory
-//! (`crate::coupling::rft`, `docs/physics.md`), a flat granular surface whose resistance is
-//! computed per surface element, 3 to 16 times faster than real time. With `rft` the `sand`
-//! section is not simulated (it stays loadable, so one file switches with
-//! `--set terrain.model=rft`, and `sandstep calibrate-rft` reads its material), and the rigid
-//! floor `robot.ground.height_m` stays the bed's bottom.
+//! ([`super::rft`], `docs/physics.md`), a flat granular surface whose resistance is computed
+//! per surface element, 3 to 16 times faster than real time. With `rft` the `sand` section is
+//! not simulated (it stays loadable, so one file switches with `--set terrain.model=rft`, and
+//! `sandstep calibrate-rft` reads its material), and the rigid floor `robot.ground.height_m`
+//! stays the bed's bottom.
 
 use serde::Deserialize;
 
-use super::{Scene, SceneError};
-use crate::coupling::rft::RftParams;
+use crate::config_error::FieldError;
 
 /// Default medium scale zeta (N/m^3): `sandstep calibrate-rft config/robot_on_sand.yaml`,
 /// the MPM plate test on that scene's sand (friction angle 45 deg, dx 5 mm: 4.46e7, R^2 0.96;
@@ -184,18 +183,33 @@ impl Default for RftCalibrationConfig {
     }
 }
 
-/// Checks `terrain`; errors name the field.
+impl TerrainConfig {
+    /// Checks the section; errors name the field. `robot_floor_m` is the scene's
+    /// `robot.ground.height_m` (None without a robot), `materials` the names under
+    /// `sand.materials` (None without sand).
+    pub fn validate(
+        &self,
+        robot_floor_m: Option<f64>,
+        materials: Option<&[&str]>,
+    ) -> Result<(), FieldError> {
+        validate(self, robot_floor_m)?;
+        validate_calibration(&self.rft.calibration, materials)
+    }
+}
+
 // Negated comparisons (`!(a > b)`) on purpose: they reject NaN too.
 #[allow(clippy::neg_cmp_op_on_partial_ord)]
-pub fn validate(scene: &Scene) -> Result<(), SceneError> {
-    let t = &scene.config.terrain;
+fn validate(t: &TerrainConfig, robot_floor_m: Option<f64>) -> Result<(), FieldError> {
     let rft = &t.rft;
     let field = |f: &str| format!("terrain.rft.{f}");
     let positive = |f: &str, v: f64| {
         if v > 0.0 && v.is_finite() {
             Ok(())
         } else {
-            Err(scene.invalid(field(f), format!("{v} must be a finite number > 0")))
+            Err(FieldError::new(
+                field(f),
+                format!("{v} must be a finite number > 0"),
+            ))
         }
     };
     positive("zeta_n_m3", rft.zeta_n_m3)?;
@@ -204,19 +218,18 @@ pub fn validate(scene: &Scene) -> Result<(), SceneError> {
     if let RftStep::Seconds(step) = rft.max_dt_s {
         positive("max_dt_s", step)?;
         if step > RFT_MAX_DT_S {
-            return Err(scene.invalid(
+            return Err(FieldError::new(
                 field("max_dt_s"),
                 format!("{step} s must be at most {RFT_MAX_DT_S} s"),
             ));
         }
     }
     if !rft.surface_height_m.is_finite() {
-        return Err(scene.invalid(field("surface_height_m"), "must be finite"));
+        return Err(FieldError::new(field("surface_height_m"), "must be finite"));
     }
-    if let Some(robot) = &scene.config.robot {
-        let floor = robot.ground.height_m;
+    if let Some(floor) = robot_floor_m {
         if !(rft.surface_height_m >= floor) {
-            return Err(scene.invalid(
+            return Err(FieldError::new(
                 field("surface_height_m"),
                 format!(
                     "{} m is below the rigid floor robot.ground.height_m = {floor} m",
@@ -225,24 +238,26 @@ pub fn validate(scene: &Scene) -> Result<(), SceneError> {
             ));
         }
     }
-    if t.model == TerrainModel::Rft && scene.config.robot.is_none() {
-        return Err(scene.invalid(
+    if t.model == TerrainModel::Rft && robot_floor_m.is_none() {
+        return Err(FieldError::new(
             "terrain.model",
             "`rft` needs a `robot` section (the bodies the terrain acts on)",
         ));
     }
-    validate_calibration(scene)
+    Ok(())
 }
 
 #[allow(clippy::neg_cmp_op_on_partial_ord)]
-fn validate_calibration(scene: &Scene) -> Result<(), SceneError> {
-    let c = &scene.config.terrain.rft.calibration;
+fn validate_calibration(
+    c: &RftCalibrationConfig,
+    materials: Option<&[&str]>,
+) -> Result<(), FieldError> {
     let field = |f: &str| format!("terrain.rft.calibration.{f}");
     let check = |f: &str, ok: bool, v: f64, rule: &str| {
         if ok {
             Ok(())
         } else {
-            Err(scene.invalid(field(f), format!("{v} must be {rule}")))
+            Err(FieldError::new(field(f), format!("{v} must be {rule}")))
         }
     };
     let positive = |v: f64| v > 0.0 && v.is_finite();
@@ -296,10 +311,9 @@ fn validate_calibration(scene: &Scene) -> Result<(), SceneError> {
         c.bed_depth_m as f64,
         &format!("deeper than final_depth_m = {}", c.final_depth_m),
     )?;
-    if let (Some(name), Some(sand)) = (&c.material, scene.sand()) {
-        if !sand.materials.contains_key(name) {
-            let known: Vec<&String> = sand.materials.keys().collect();
-            return Err(scene.invalid(
+    if let (Some(name), Some(known)) = (&c.material, materials) {
+        if !known.contains(&name.as_str()) {
+            return Err(FieldError::new(
                 field("material"),
                 format!("unknown material `{name}` (materials: {known:?})"),
             ));
@@ -308,18 +322,18 @@ fn validate_calibration(scene: &Scene) -> Result<(), SceneError> {
     Ok(())
 }
 
-/// The RFT terrain acting on the robot's body and legs (every collision box; the legs' thin
-/// boxes as plates), in the order body, then [`crate::robot::LEGS`].
-pub fn robot_rft_terrain(
-    robot: &crate::robot::RobotSim,
-    cfg: &RftConfig,
-) -> Result<crate::coupling::rft::RftTerrain, crate::coupling::rft::RftError> {
-    let parts = std::iter::once(("body".to_string(), robot.body_handle())).chain(
-        crate::robot::LEGS
-            .iter()
-            .zip(robot.leg_handles())
-            .map(|(leg, h)| (leg.link_name(), h)),
-    );
-    let world = robot.world();
-    crate::coupling::rft::RftTerrain::new(cfg.params(), parts, &world.bodies, &world.colliders)
+/// The RFT medium and how bodies are discretised.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RftParams {
+    /// Medium scale zeta: vertical stress per unit depth under a horizontal plate pressed
+    /// straight down (N/m^3), > 0.
+    pub zeta_n_m3: f64,
+    /// Height of the flat free surface (m): depth is measured from it.
+    pub surface_height_m: f64,
+    /// Longest edge of a surface element (m), > 0; also the thickness below which a box is a
+    /// thin plate.
+    pub element_size_m: f64,
+    /// Regularisation speed v_ref (m/s), > 0: an element slower than this feels the fraction
+    /// `|v| / v_ref` of its RFT force.
+    pub reference_speed_m_s: f64,
 }

@@ -1,0 +1,70 @@
+//! The command line: one file per group of commands, the options they share defined once
+//! (`options.rs`), and the progress bars drawn from the library's progress reports
+//! (`progress.rs`). The library below knows nothing of clap, the terminal or the exit code; the
+//! `sandstep` binary only calls [`main`].
+
+mod options;
+pub mod progress;
+mod run;
+mod series;
+mod tools;
+mod urdf;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+pub use progress::Bars;
+pub use urdf::UrdfArgs;
+
+#[derive(Parser)]
+#[command(
+    name = "sandstep",
+    version,
+    about = "Granular terrain (MLS-MPM sand) for legged robots"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run a scene headless and print a summary.
+    Run(run::RunArgs),
+    /// Run a scene as a ROS 2 node (default: the robot on sand) until stopped or --duration.
+    Node(run::NodeArgs),
+    /// Sweep leg curvature, gait frequency and terrain model; measure the robot's speed.
+    Experiment(series::ExperimentArgs),
+    /// Measure what each setting costs and buys: error against wall time, Pareto front.
+    Sweep(series::SweepArgs),
+    /// Write a hexapod URDF (and its leg meshes) from leg and body parameters.
+    Urdf(urdf::UrdfArgs),
+    /// Summarise a recorded bag: distance, speed per gait cycle, sinkage, leg forces, commands.
+    Analyze(tools::AnalyzeArgs),
+    /// Calibrate resistive force theory: press a plate into the scene's MPM sand and fit zeta.
+    CalibrateRft(tools::CalibrateRftArgs),
+    /// Measure solver throughput on a 3D sand block collapsing under gravity.
+    Bench(tools::BenchArgs),
+}
+
+/// Parses the command line, runs the command, and prints an error (with its causes) on stderr.
+pub fn main() -> ExitCode {
+    let result = match Cli::parse().command {
+        Command::Run(args) => run::run(args),
+        Command::Node(args) => run::node(args),
+        Command::Experiment(args) => series::experiment(args),
+        Command::Sweep(args) => series::sweep(args),
+        Command::Urdf(args) => urdf::urdf(&args),
+        Command::Analyze(args) => tools::analyze(args),
+        Command::CalibrateRft(args) => tools::calibrate_rft(args),
+        Command::Bench(args) => tools::bench(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,110 @@
+//! The options several commands share, defined once: worker threads, `--set` overrides,
+//! `--json`, `--duration`, the bag, and the Ctrl-C flag.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+/// Parent of the default bag directories.
+const DEFAULT_BAG_PARENT: &str = "bags";
+
+/// `--threads N`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct Threads {
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+impl Threads {
+    /// Sizes rayon's global pool (once per process).
+    pub fn apply(&self) -> anyhow::Result<()> {
+        if let Some(n) = self.threads {
+            anyhow::ensure!(n > 0, "--threads must be at least 1");
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build_global()?;
+        }
+        Ok(())
+    }
+}
+
+/// `--set KEY.PATH=VALUE`, repeatable.
+#[derive(clap::Args, Debug, Clone)]
+pub struct Overrides {
+    /// Change one value of the file, e.g. --set sand.dx_m=0.01 or --set cycles=2; the value is
+    /// YAML (repeatable).
+    #[arg(long = "set", value_name = "KEY.PATH=VALUE")]
+    pub overrides: Vec<String>,
+}
+
+/// `--json`.
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct Json {
+    /// Print one JSON object on stdout instead of the human summary.
+    #[arg(long)]
+    pub json: bool,
+}
+
+impl Json {
+    /// Progress bars are drawn unless the output is JSON.
+    pub fn show_progress(self) -> bool {
+        !self.json
+    }
+}
+
+/// `--duration S`.
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct Duration {
+    /// Simulated time to run (s); overrides the scene's duration_s.
+    #[arg(long)]
+    pub duration: Option<f64>,
+}
+
+impl Duration {
+    /// The duration, checked to be a positive number of seconds.
+    pub fn checked(self) -> anyhow::Result<Option<f64>> {
+        if let Some(d) = self.duration {
+            anyhow::ensure!(d > 0.0 && d.is_finite(), "--duration must be > 0 seconds");
+        }
+        Ok(self.duration)
+    }
+}
+
+/// Where a run records its bag.
+#[derive(clap::Args, Debug, Clone)]
+pub struct BagArgs {
+    /// Bag directory to create (default bags/<scene>-<YYYYmmdd-HHMMSS>).
+    #[arg(long = "bag", value_name = "DIR", conflicts_with = "no_bag")]
+    pub dir: Option<PathBuf>,
+    /// Do not record a bag.
+    #[arg(long)]
+    pub no_bag: bool,
+}
+
+impl BagArgs {
+    /// The bag directory for `scene_name`, or `None` with `--no-bag`.
+    pub fn dir(&self, scene_name: &str) -> Option<PathBuf> {
+        if self.no_bag {
+            return None;
+        }
+        Some(self.dir.clone().unwrap_or_else(|| {
+            crate::ros::default_bag_dir(Path::new(DEFAULT_BAG_PARENT), scene_name)
+        }))
+    }
+}
+
+/// A flag set by the first Ctrl-C or SIGTERM, for the job to stop after its current step and
+/// finish its outputs; a second one exits at once.
+pub fn stop_flag() -> anyhow::Result<Arc<AtomicBool>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || {
+        if flag.swap(true, Ordering::SeqCst) {
+            eprintln!("\nstopping now");
+            std::process::exit(130);
+        }
+        eprintln!("\nstopping after this step (again to quit at once)");
+    })?;
+    Ok(stop)
+}

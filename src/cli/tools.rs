@@ -1,0 +1,148 @@
+//! `sandstep analyze` (a recorded bag), `sandstep calibrate-rft` (RFT's zeta from the scene's
+//! sand) and `sandstep bench` (the sand substep's throughput).
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+
+use super::options::{Json, Overrides, Threads};
+use crate::analysis::bag::{analyze_bag_with, AnalysisOptions};
+use crate::analysis::plots::write_plots;
+use crate::scene::Scene;
+
+/// `sandstep analyze`.
+#[derive(clap::Args)]
+pub struct AnalyzeArgs {
+    /// Bag directory (rosbag2, MCAP) or a bare .mcap file.
+    bag: PathBuf,
+    /// Analyse from this time on (s since the first body pose; e.g. after settling).
+    #[arg(long, value_name = "S", default_value_t = 0.0)]
+    start: f64,
+    /// Write trajectory, speed, joint-angle and leg-force plots (PNG and SVG) into DIR.
+    #[arg(long, value_name = "DIR")]
+    plots: Option<PathBuf>,
+    #[command(flatten)]
+    json: Json,
+}
+
+/// `sandstep calibrate-rft`.
+#[derive(clap::Args)]
+pub struct CalibrateRftArgs {
+    /// Scene file (YAML) with the sand, e.g. config/robot_on_sand.yaml; the test's settings
+    /// are its terrain.rft.calibration.
+    scene: PathBuf,
+    #[command(flatten)]
+    threads: Threads,
+    #[command(flatten)]
+    overrides: Overrides,
+    #[command(flatten)]
+    json: Json,
+}
+
+/// `sandstep bench`.
+#[derive(clap::Args)]
+pub struct BenchArgs {
+    /// Number of particles (8 per cell).
+    #[arg(long, default_value_t = 500_000)]
+    particles: usize,
+    #[command(flatten)]
+    threads: Threads,
+    /// Timed substeps.
+    #[arg(long, default_value_t = 50)]
+    steps: u64,
+    #[command(flatten)]
+    json: Json,
+}
+
+/// Analyses the bag (from `--start` on), writes plots with `--plots`, and prints the summary.
+pub fn analyze(args: AnalyzeArgs) -> anyhow::Result<()> {
+    let opts = AnalysisOptions {
+        start_s: args.start,
+        max_cycles: None,
+    };
+    let bag = &args.bag;
+    let analysis =
+        analyze_bag_with(bag, &opts).with_context(|| format!("analysing {}", bag.display()))?;
+    let mut summary = analysis.summary.clone();
+    if let Some(dir) = &args.plots {
+        let written = write_plots(&analysis, dir)
+            .with_context(|| format!("writing plots into {}", dir.display()))?;
+        summary.plots = written
+            .files
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect();
+        summary.notes.extend(written.notes);
+    }
+    if args.json.json {
+        println!("{}", serde_json::to_string(&summary)?);
+    } else {
+        print!("{summary}");
+    }
+    Ok(())
+}
+
+/// Presses a plate into the scene's sand, fits zeta and prints it with the force per depth.
+pub fn calibrate_rft(args: CalibrateRftArgs) -> anyhow::Result<()> {
+    args.threads.apply()?;
+    let scene = Scene::load(&args.scene, &args.overrides.overrides)?;
+    let c = scene.calibrate_rft()?;
+    if args.json.json {
+        println!("{}", serde_json::to_string(&c)?);
+        return Ok(());
+    }
+    println!(
+        "{}: zeta = {:.4e} N/m^3 (R^2 {:.3}) for material {}: plate {:.1} mm square \
+         ({:.3e} m^2) pressed at {:.3} m/s to {:.1} mm, dx {:.1} mm, {} particles, \
+         {:.1} s wall",
+        c.scene,
+        c.zeta_n_m3,
+        c.r_squared,
+        c.material,
+        c.plate_side_m * 1e3,
+        c.plate_area_m2,
+        c.speed_m_s,
+        c.final_depth_m * 1e3,
+        c.dx_m * 1e3,
+        c.particles,
+        c.wall_time_s
+    );
+    for cell in &c.cells {
+        println!(
+            "  depth {:5.1} mm: MPM {:.4} N, RFT {:.4} N",
+            cell.depth_m * 1e3,
+            cell.force_n,
+            c.zeta_n_m3 * c.plate_area_m2 * cell.depth_m
+        );
+    }
+    Ok(())
+}
+
+/// Times the sand substep on a collapsing block and prints particle-steps per second, per
+/// stage too.
+pub fn bench(args: BenchArgs) -> anyhow::Result<()> {
+    args.threads.apply()?;
+    anyhow::ensure!(args.particles >= 8, "--particles must be at least 8");
+    let report = crate::bench::run(args.particles, args.steps)?;
+    if args.json.json {
+        println!("{}", serde_json::to_string(&report)?);
+        return Ok(());
+    }
+    println!(
+        "{} particles, {} threads, {} steps in {:.2} s: {:.3e} particle-steps/s, \
+         {:.0} bytes/particle",
+        report.particles,
+        report.threads,
+        report.steps,
+        report.wall_time_s,
+        report.particle_steps_per_s,
+        report.bytes_per_particle
+    );
+    for (stage, rate) in &report.stages {
+        println!(
+            "  {stage:15} {:.3e} particle-steps/s",
+            rate.as_f64().unwrap_or(0.0)
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,126 @@
+//! `sandstep urdf`: writes a hexapod URDF and its leg mesh from leg and body parameters.
+
+use std::path::PathBuf;
+
+use crate::robot::{leg_mesh_path, write_hexapod_urdf, HexapodParams, LegParams};
+
+/// Arguments of `sandstep urdf`. Defaults reproduce the published robot
+/// (`urdf/hexapod.urdf`; with `--reversed`, `urdf/hexapod_reversed.urdf`).
+#[derive(clap::Args, Debug, Clone)]
+pub struct UrdfArgs {
+    /// Output URDF path; the leg mesh goes to `meshes/` beside it.
+    /// Default: urdf/hexapod.urdf, or urdf/hexapod_reversed.urdf with --reversed.
+    #[arg(long, short)]
+    pub output: Option<PathBuf>,
+    /// Leg curvature in units of 1/R (R = chord/2): 1 = C-leg (half circle, convex side
+    /// leading), -1 = reversed, 0 = straight; anything in [-1, 1].
+    #[arg(
+        long,
+        default_value_t = 1.0,
+        allow_negative_numbers = true,
+        conflicts_with = "reversed"
+    )]
+    pub curvature: f64,
+    /// Reversed legs: the same as --curvature -1.
+    #[arg(long)]
+    pub reversed: bool,
+    /// Leg chord 2R (m).
+    #[arg(long, default_value_t = LegParams::default().chord_m)]
+    pub chord_m: f64,
+    /// Leg width along the hip axis (m).
+    #[arg(long, default_value_t = LegParams::default().width_m)]
+    pub width_m: f64,
+    /// Leg thickness (m).
+    #[arg(long, default_value_t = LegParams::default().thickness_m)]
+    pub thickness_m: f64,
+    /// Leg material density (kg/m^3); 1050 is ABS.
+    #[arg(long, default_value_t = LegParams::default().density_kg_m3)]
+    pub density_kg_m3: f64,
+    /// Total robot mass, legs included (kg); the body gets the rest.
+    #[arg(long, default_value_t = HexapodParams::default().total_mass_kg)]
+    pub total_mass_kg: f64,
+}
+
+impl UrdfArgs {
+    /// The robot these arguments describe.
+    pub fn params(&self) -> HexapodParams {
+        let mut p = HexapodParams::default();
+        p.legs.chord_m = self.chord_m;
+        p.legs.width_m = self.width_m;
+        p.legs.thickness_m = self.thickness_m;
+        p.legs.density_kg_m3 = self.density_kg_m3;
+        p.total_mass_kg = self.total_mass_kg;
+        p.with_curvature(if self.reversed { -1.0 } else { self.curvature })
+    }
+
+    /// The URDF path to write.
+    pub fn output_path(&self) -> PathBuf {
+        self.output.clone().unwrap_or_else(|| {
+            PathBuf::from(if self.reversed {
+                "urdf/hexapod_reversed.urdf"
+            } else {
+                "urdf/hexapod.urdf"
+            })
+        })
+    }
+}
+
+/// Runs `sandstep urdf`: writes the URDF and mesh, prints what was written.
+pub fn urdf(args: &UrdfArgs) -> anyhow::Result<()> {
+    let params = args.params();
+    let path = args.output_path();
+    write_hexapod_urdf(&params, &path)?;
+    let mesh = leg_mesh_path(&path);
+    println!(
+        "wrote {} and {}: leg {:.3} g (curvature {:+.3} 1/m), body {:.3} g, total {:.3} g",
+        path.display(),
+        mesh.display(),
+        1e3 * params.legs.mass_kg(),
+        params.legs.curvature_per_m,
+        1e3 * params.body_mass_kg(),
+        1e3 * params.total_mass_kg
+    );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(clap::Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: UrdfArgs,
+    }
+
+    fn parse(argv: &[&str]) -> Result<UrdfArgs, clap::Error> {
+        use clap::Parser;
+        Cli::try_parse_from(std::iter::once("urdf").chain(argv.iter().copied())).map(|c| c.args)
+    }
+
+    #[test]
+    fn command_line_selects_curvature_and_output() {
+        let k_max = LegParams::default().max_curvature_per_m();
+        let c = parse(&[]).unwrap();
+        assert_eq!(c.params(), HexapodParams::default());
+        assert_eq!(c.output_path(), PathBuf::from("urdf/hexapod.urdf"));
+        let r = parse(&["--reversed"]).unwrap();
+        assert_eq!(r.params(), HexapodParams::reversed());
+        assert_eq!(r.output_path(), PathBuf::from("urdf/hexapod_reversed.urdf"));
+        let half = parse(&["--curvature", "-0.5", "-o", "x/y.urdf"]).unwrap();
+        assert!((half.params().legs.curvature_per_m + 0.5 * k_max).abs() < 1e-12);
+        assert_eq!(half.output_path(), PathBuf::from("x/y.urdf"));
+        assert!(parse(&["--reversed", "--curvature", "0.5"]).is_err());
+    }
+
+    #[test]
+    fn the_command_writes_urdf_and_mesh_or_names_the_bad_parameter() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("k.urdf");
+        let out_str = out.to_str().unwrap();
+        urdf(&parse(&["--curvature", "0.25", "-o", out_str]).unwrap()).unwrap();
+        assert!(out.is_file() && leg_mesh_path(&out).is_file());
+        let err = urdf(&parse(&["--curvature", "1.5", "-o", out_str]).unwrap());
+        assert!(err.unwrap_err().to_string().contains("curvature_per_m"));
+    }
+}

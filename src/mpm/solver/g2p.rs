@@ -1,0 +1,293 @@
+//! G2P: each particle gathers its new velocity and velocity gradient from its 27 stencil nodes
+//! (Hu et al. 2018, eq. 17 and 25), is advected, and keeps its affine matrix for the next P2G
+//! (APIC) or drops it (PIC). Near colliders, CPIC reads a ghost velocity at the nodes across a
+//! collider and pushes back a particle found slightly on the wrong side. The deformation
+//! gradient and the stress follow in `particle_update.rs`.
+
+use nalgebra::{Matrix3, Vector3};
+use rayon::prelude::*;
+
+use super::cpic_grid::{add_impulses, CpicParticle, CpicTransfer, GridColours};
+use super::{local_base, scale_columns, split_runs, Solver, Transfer};
+use crate::mpm::cpic::{
+    conflict_normal, conflicts, ghost_velocity, stencil_nodes, wall_distance, ColliderImpulse,
+    ColliderMotion, PENALTY_MAX_CELLS, PENALTY_MIN_CELLS,
+};
+use crate::mpm::grid::{node_in_arena, ArenaSlot, ParticleBlock, SparseGrid, ARENA_NODES};
+use crate::mpm::kernel::{Kernel, Stencil};
+use crate::mpm::particles::Particles;
+use crate::mpm::simd::F4;
+
+impl Solver {
+    /// G2P over the awake particle blocks: velocity, velocity gradient (kept in
+    /// `self.velocity_gradient` for the particle update), advection, the affine matrix, and
+    /// the clamp into the domain. Returns the momentum CPIC handed to each collider.
+    pub(super) fn grid_to_particle(
+        &mut self,
+        dt: f32,
+        colliders: &[ColliderMotion],
+    ) -> Vec<ColliderImpulse> {
+        let context = G2pContext {
+            grid: &self.grid,
+            colours: &self.colours,
+            colliders,
+            slots: &self.arena_slots,
+            dt,
+            dx: self.settings.dx,
+            lo: self.bounds[0],
+            hi: self.bounds[1],
+            affine_transfer: self.settings.transfer == Transfer::Apic,
+            kernel: self.settings.kernel,
+        };
+        let blocks = &self.grid.particle_blocks;
+        self.velocity_gradient
+            .resize(self.particles.len(), Matrix3::zeros());
+        let views = G2pView::split(&mut self.particles, &mut self.velocity_gradient, blocks);
+        views
+            .into_par_iter()
+            .zip(blocks.par_iter())
+            .map(|(view, pb)| grid_to_particle_block(&context, view, pb))
+            .collect::<Vec<_>>()
+            .into_iter()
+            .fold(Vec::new(), |sum, block| add_impulses(sum, &block))
+    }
+}
+
+/// What G2P reads besides the particles.
+struct G2pContext<'a> {
+    grid: &'a SparseGrid,
+    colours: &'a GridColours,
+    colliders: &'a [ColliderMotion],
+    slots: &'a [ArenaSlot; ARENA_NODES],
+    /// Substep (s).
+    dt: f32,
+    /// Grid spacing (m).
+    dx: f32,
+    /// The box particles are clamped into (m): the domain, or its x window.
+    lo: Vector3<f32>,
+    hi: Vector3<f32>,
+    /// Keep the affine matrix for the next P2G (APIC) or not (PIC).
+    affine_transfer: bool,
+    kernel: Kernel,
+}
+
+/// G2P of one particle block: loads its 6x6x6 arena of node velocities once, then per particle
+/// gathers v and C (with ghost velocities near colliders), advects, pushes back and clamps.
+/// Returns the CPIC impulses on the colliders (empty where no particle is near one).
+#[inline(never)]
+fn grid_to_particle_block(
+    cx: &G2pContext,
+    view: G2pView,
+    pb: &ParticleBlock,
+) -> Vec<ColliderImpulse> {
+    let G2pContext {
+        grid,
+        colours,
+        colliders,
+        slots,
+        dt,
+        dx,
+        lo,
+        hi,
+        affine_transfer,
+        kernel,
+    } = *cx;
+    let mut arena = [F4::splat(0.0); ARENA_NODES];
+    for (a, slot) in slots.iter().enumerate() {
+        arena[a] = F4::from_array(
+            grid.blocks[pb.arena_blocks[slot.block as usize] as usize][slot.node as usize],
+        );
+    }
+    let mut impulses = Vec::new();
+    let colour_arena = colours.arena(pb, slots);
+    for i in 0..view.position.len() {
+        let x = view.position[i];
+        let s = Stencil::of(kernel, grid.to_grid(&x));
+        let base = local_base(&s, pb);
+        let tags = view.cpic_tags[i];
+        let near_collider = colour_arena.as_ref().filter(|_| tags != 0);
+        let particle = || CpicParticle {
+            x,
+            v: view.velocity[i],
+            mass: view.mass[i],
+            tags,
+        };
+        let (mut v, b) = match near_collider {
+            Some(colour) => {
+                if impulses.is_empty() {
+                    impulses = vec![ColliderImpulse::default(); colliders.len()];
+                }
+                let cx = CpicTransfer {
+                    colours: &colour[..],
+                    colliders,
+                    dx,
+                };
+                gather_cpic(&arena, &cx, &s, base, &particle(), &mut impulses)
+            }
+            None => gather(&arena, &s, base),
+        };
+        // C_p = sum w v_i (x_i - x_p)^T D^-1, with offsets in cells.
+        let c = scale_columns(&b, &(s.inverse_moment / dx));
+        let mut x_new = x + v * dt;
+        // Near a collider: plain PIC (no affine transfer) and the penalty push-back.
+        view.affine[i] = if near_collider.is_some() || !affine_transfer {
+            Matrix3::zeros()
+        } else {
+            c
+        };
+        if let Some(colour) = near_collider {
+            let cx = CpicTransfer {
+                colours: &colour[..],
+                colliders,
+                dx,
+            };
+            push_back(
+                &cx,
+                &s,
+                base,
+                &particle(),
+                &mut x_new,
+                &mut v,
+                &mut impulses,
+            );
+        }
+        view.position[i] = x_new.sup(&lo).inf(&hi);
+        view.velocity[i] = v;
+        view.velocity_gradient[i] = c;
+    }
+    impulses
+}
+
+/// Gathers `(sum w_i v_i, sum w_i v_i d_i^T)` over the 27 stencil nodes, `d_i` in cells. The
+/// outer product is summed per axis: `sum w v (i, j, k)^T - (sum w v) fx^T`. Arena nodes are
+/// SIMD vectors `[v_x, v_y, v_z, m]`; the mass lane is summed along and ignored.
+#[inline(always)]
+fn gather(
+    arena: &[F4; ARENA_NODES],
+    s: &Stencil,
+    base: [usize; 3],
+) -> (Vector3<f32>, Matrix3<f32>) {
+    let zero = F4::splat(0.0);
+    let w_k = s.weights[2].map(F4::splat);
+    let (mut v, mut by_i, mut by_j, mut by_k) = (zero, zero, zero, zero);
+    for i in 0..3 {
+        let mut v_i = zero;
+        for j in 0..3 {
+            let w_ij = F4::splat(s.weights[0][i] * s.weights[1][j]);
+            let row = node_in_arena(base[0] + i, base[1] + j, base[2]);
+            let v0 = arena[row] * w_k[0];
+            let v1 = arena[row + 1] * w_k[1];
+            let v2 = arena[row + 2] * w_k[2];
+            let v_ij = (v0 + v1 + v2) * w_ij;
+            by_k = by_k + (v1 + v2 + v2) * w_ij;
+            v_i = v_i + v_ij;
+            by_j = by_j + v_ij * F4::splat(j as f32);
+        }
+        v = v + v_i;
+        by_i = by_i + v_i * F4::splat(i as f32);
+    }
+    let column = |c: F4| {
+        let [x, y, z, _] = c.to_array();
+        Vector3::new(x, y, z)
+    };
+    let v = column(v);
+    let b =
+        Matrix3::from_columns(&[column(by_i), column(by_j), column(by_k)]) - v * s.fx.transpose();
+    (v, b)
+}
+
+/// [`gather`] with CPIC: an incompatible node contributes the ghost velocity instead of its own.
+#[inline(never)]
+fn gather_cpic(
+    arena: &[F4; ARENA_NODES],
+    cx: &CpicTransfer,
+    s: &Stencil,
+    base: [usize; 3],
+    p: &CpicParticle,
+    impulses: &mut [ColliderImpulse],
+) -> (Vector3<f32>, Matrix3<f32>) {
+    let (mut v, mut b) = (Vector3::zeros(), Matrix3::zeros());
+    for (a, w, d) in stencil_nodes(s, base) {
+        let colour = &cx.colours[a];
+        let conflict = conflicts(colour.bits, p.tags);
+        let v_node = if conflict == 0 {
+            let [x, y, z, _] = arena[a].to_array();
+            Vector3::new(x, y, z)
+        } else {
+            let x_node = p.x + d * cx.dx;
+            let (r, normal) = conflict_normal(colour, conflict, p.tags);
+            let motion = &cx.colliders[r];
+            let ghost = ghost_velocity(p.v, &x_node, motion, normal);
+            impulses[r].add_at(-ghost * (w * p.mass), &x_node, &motion.centre_m);
+            ghost
+        };
+        v += v_node * w;
+        b += v_node * w * d.transpose();
+    }
+    (v, b)
+}
+
+/// CPIC penalty: a particle that ended up between [`PENALTY_MIN_CELLS`] and
+/// [`PENALTY_MAX_CELLS`] on the wrong side of its closest collider is put back on the surface
+/// and loses its velocity into the collider; the collider receives the reaction.
+#[inline(never)]
+fn push_back(
+    cx: &CpicTransfer,
+    s: &Stencil,
+    base: [usize; 3],
+    p: &CpicParticle,
+    x_new: &mut Vector3<f32>,
+    v: &mut Vector3<f32>,
+    impulses: &mut [ColliderImpulse],
+) {
+    let Some((r, distance, normal)) = wall_distance(p.tags, cx.colours, s, base) else {
+        return;
+    };
+    let distance = distance + normal.dot(&(*x_new - p.x));
+    if distance >= -PENALTY_MIN_CELLS * cx.dx || distance <= -PENALTY_MAX_CELLS * cx.dx {
+        return;
+    }
+    *x_new -= normal * distance;
+    let motion = &cx.colliders[r];
+    let approach = (*v - motion.velocity_at(x_new)).dot(&normal);
+    if approach < 0.0 {
+        let dv = -approach * normal;
+        *v += dv;
+        impulses[r].add_at(-dv * p.mass, x_new, &motion.centre_m);
+    }
+}
+
+/// Mutable views of the particle arrays G2P writes, for one particle block.
+struct G2pView<'a> {
+    position: &'a mut [Vector3<f32>],
+    velocity: &'a mut [Vector3<f32>],
+    affine: &'a mut [Matrix3<f32>],
+    velocity_gradient: &'a mut [Matrix3<f32>],
+    mass: &'a [f32],
+    cpic_tags: &'a [u64],
+}
+
+impl<'a> G2pView<'a> {
+    fn split(
+        p: &'a mut Particles,
+        velocity_gradient: &'a mut [Matrix3<f32>],
+        blocks: &[ParticleBlock],
+    ) -> Vec<G2pView<'a>> {
+        let mut position = split_runs(&mut p.position, blocks).into_iter();
+        let mut velocity = split_runs(&mut p.velocity, blocks).into_iter();
+        let mut affine = split_runs(&mut p.affine, blocks).into_iter();
+        let mut velocity_gradient = split_runs(velocity_gradient, blocks).into_iter();
+        let (mass, cpic_tags) = (&p.mass[..], &p.cpic_tags[..]);
+        blocks
+            .iter()
+            .map(|pb| G2pView {
+                position: position.next().unwrap(),
+                velocity: velocity.next().unwrap(),
+                affine: affine.next().unwrap(),
+                velocity_gradient: velocity_gradient.next().unwrap(),
+                mass: &mass[pb.start..pb.end],
+                cpic_tags: &cpic_tags[pb.start..pb.end],
+            })
+            .collect()
+    }
+}

@@ -1,0 +1,202 @@
+//! P2G: each particle's mass and momentum, with the MLS-MPM stress and APIC affine terms fused
+//! (Hu et al. 2018, eq. 29), go to the 27 nodes of its stencil; near colliders, CPIC leaves out
+//! the nodes across a collider and hands what they would have received to the collider.
+
+use nalgebra::{Matrix3, Vector3};
+use rayon::prelude::*;
+
+use super::cpic_grid::{add_impulses, CpicParticle, CpicTransfer};
+use super::{local_base, scale_columns, Solver};
+use crate::mpm::cpic::{
+    conflict_normal, conflicts, stencil_nodes, ColliderImpulse, ColliderMotion,
+};
+use crate::mpm::grid::{node_in_arena, Block, ARENA_NODES};
+use crate::mpm::kernel::Stencil;
+use crate::mpm::simd::F4;
+
+impl Solver {
+    /// P2G: each particle block scatters into a private 6x6x6 arena, and arenas are added to the
+    /// grid in 8 phases by block parity, so no two writers ever share a node (no atomics, no
+    /// locks). Returns the momentum the colliders took in place of the nodes across them.
+    pub(super) fn particle_to_grid(
+        &mut self,
+        dt: f32,
+        colliders: &[ColliderMotion],
+    ) -> Vec<ColliderImpulse> {
+        let dx = self.settings.dx;
+        // Q_p = -dt V_p tau_p D^-1 + m_p C_p, applied to offsets measured in cells (D^-1 =
+        // 4/dx^2 for the quadratic B-spline).
+        let stress_scale = -dt / (dx * dx) * dx;
+        let kernel = self.settings.kernel;
+        let particles = &self.particles;
+        let colours = &self.colours;
+        let grid_blocks = SharedBlocks::new(&mut self.grid.blocks);
+        let slots = &self.arena_slots;
+        let mut impulses = Vec::new();
+        for phase in 0..8 {
+            let phase_impulses: Vec<Vec<ColliderImpulse>> = self
+                .grid
+                .particle_blocks
+                .par_iter()
+                .filter(|pb| pb.phase() == phase)
+                .map(|pb| {
+                    let mut arena = [F4::splat(0.0); ARENA_NODES];
+                    let colour_arena = colours.arena(pb, slots);
+                    let mut block_impulses = Vec::new();
+                    for p in pb.start..pb.end {
+                        let x = particles.position[p];
+                        let s = Stencil::of(kernel, self.grid.to_grid(&x));
+                        let m = particles.mass[p];
+                        let momentum = particles.velocity[p] * m;
+                        let q_cells = scale_columns(
+                            &particles.stress[p],
+                            &(s.inverse_moment * stress_scale * particles.volume[p]),
+                        ) + particles.affine[p] * (m * dx);
+                        let base = local_base(&s, pb);
+                        let tags = particles.cpic_tags[p];
+                        match &colour_arena {
+                            Some(colour) if tags != 0 => {
+                                block_impulses.resize(colliders.len(), ColliderImpulse::default());
+                                let particle = CpicParticle {
+                                    x,
+                                    v: particles.velocity[p],
+                                    mass: m,
+                                    tags,
+                                };
+                                let cx = CpicTransfer {
+                                    colours: &colour[..],
+                                    colliders,
+                                    dx,
+                                };
+                                scatter_cpic(
+                                    &mut arena,
+                                    &cx,
+                                    &s,
+                                    base,
+                                    &particle,
+                                    &q_cells,
+                                    &mut block_impulses,
+                                );
+                            }
+                            _ => scatter(&mut arena, &s, base, m, momentum, &q_cells),
+                        }
+                    }
+                    for (a, slot) in slots.iter().enumerate() {
+                        // SAFETY: blocks of one phase have disjoint arenas (see
+                        // `ParticleBlock::phase`), so this block is written by no other task.
+                        let block =
+                            unsafe { grid_blocks.get_mut(pb.arena_blocks[slot.block as usize]) };
+                        let node = &mut block[slot.node as usize];
+                        *node = (F4::from_array(*node) + arena[a]).to_array();
+                    }
+                    block_impulses
+                })
+                .filter(|i| !i.is_empty())
+                .collect();
+            for block in &phase_impulses {
+                impulses = add_impulses(impulses, block);
+            }
+        }
+        impulses
+    }
+}
+
+/// Adds one particle's mass and momentum `w_ip (m_p v_p + Q_p (x_i - x_p))` to its 27 arena
+/// nodes; `q_cells` is Q_p scaled for offsets in cells. With `x_i - x_p = (i, j, k) - fx` (cells)
+/// the affine term is built up one axis at a time, and a node's four components
+/// `[p_x, p_y, p_z, m]` are one SIMD vector: two multiplies and two adds per node.
+#[inline(always)]
+fn scatter(
+    arena: &mut [F4; ARENA_NODES],
+    s: &Stencil,
+    base: [usize; 3],
+    mass: f32,
+    momentum: Vector3<f32>,
+    q_cells: &Matrix3<f32>,
+) {
+    // Columns of Q with a zero mass lane; the mass lane of `at_base` carries m_p.
+    let q =
+        [0, 1, 2].map(|c| F4::from_array([q_cells[(0, c)], q_cells[(1, c)], q_cells[(2, c)], 0.0]));
+    let p = momentum - q_cells * s.fx;
+    let at_base = F4::from_array([p.x, p.y, p.z, mass]);
+    let w_k = s.weights[2].map(F4::splat);
+    let mut p_i = at_base;
+    for i in 0..3 {
+        let mut p_ij = p_i;
+        for j in 0..3 {
+            let w_ij = F4::splat(s.weights[0][i] * s.weights[1][j]);
+            let row = node_in_arena(base[0] + i, base[1] + j, base[2]);
+            let p_ij0 = p_ij * w_ij;
+            let q_k = q[2] * w_ij;
+            arena[row] = arena[row] + p_ij0 * w_k[0];
+            arena[row + 1] = arena[row + 1] + (p_ij0 + q_k) * w_k[1];
+            arena[row + 2] = arena[row + 2] + (p_ij0 + q_k + q_k) * w_k[2];
+            p_ij = p_ij + q[1];
+        }
+        p_i = p_i + q[0];
+    }
+}
+
+/// [`scatter`] with CPIC: a node incompatible with the particle receives nothing; the collider
+/// of the conflict receives, at the node, the momentum the particle would have left there less
+/// what the ghost velocity gives back in G2P.
+#[inline(never)]
+fn scatter_cpic(
+    arena: &mut [F4; ARENA_NODES],
+    cx: &CpicTransfer,
+    s: &Stencil,
+    base: [usize; 3],
+    p: &CpicParticle,
+    q_cells: &Matrix3<f32>,
+    impulses: &mut [ColliderImpulse],
+) {
+    let momentum = p.v * p.mass;
+    for (a, w, d) in stencil_nodes(s, base) {
+        let contribution = (momentum + q_cells * d) * w;
+        let colour = &cx.colours[a];
+        let conflict = conflicts(colour.bits, p.tags);
+        if conflict == 0 {
+            let node = F4::from_array([contribution.x, contribution.y, contribution.z, w * p.mass]);
+            arena[a] = arena[a] + node;
+        } else {
+            // The collider takes what the node would have received; G2P subtracts what the
+            // ghost velocity gives back.
+            let x_node = p.x + d * cx.dx;
+            let (r, _) = conflict_normal(colour, conflict, p.tags);
+            let centre = &cx.colliders[r].centre_m;
+            impulses[r].add_at(contribution, &x_node, centre);
+            impulses[r].sand_mass_kg += (w * p.mass) as f64;
+            let (m, arm) = ((w * p.mass) as f64, (x_node - centre).cast::<f64>());
+            impulses[r].sand_first_moment += arm * m;
+            impulses[r].sand_inertia +=
+                (Matrix3::identity() * arm.norm_squared() - arm * arm.transpose()) * m;
+        }
+    }
+}
+
+/// Grid blocks written from parallel P2G tasks that are known to touch disjoint blocks.
+struct SharedBlocks {
+    ptr: *mut Block,
+    len: usize,
+}
+
+// SAFETY: access goes through `get_mut`, whose callers guarantee disjointness.
+unsafe impl Sync for SharedBlocks {}
+unsafe impl Send for SharedBlocks {}
+
+impl SharedBlocks {
+    fn new(blocks: &mut [Block]) -> Self {
+        SharedBlocks {
+            ptr: blocks.as_mut_ptr(),
+            len: blocks.len(),
+        }
+    }
+
+    /// # Safety
+    /// No other reference to block `i` may exist while the returned one lives.
+    #[allow(clippy::mut_from_ref)]
+    unsafe fn get_mut(&self, i: u32) -> &mut Block {
+        assert!((i as usize) < self.len);
+        &mut *self.ptr.add(i as usize)
+    }
+}

@@ -1,0 +1,73 @@
+//! What the solver is told besides its particles: materials, grid and domain, walls, gravity,
+//! how the time step is chosen, the transfer and the kernel.
+
+use nalgebra::Vector3;
+
+use crate::mpm::boundary::Walls;
+use crate::mpm::kernel::Kernel;
+use crate::mpm::material::Constitutive;
+use crate::mpm::sleep::SleepSettings;
+
+/// A material the particles can be made of.
+#[derive(Clone, Debug)]
+pub struct SolverMaterial {
+    /// Name from the scene file, for messages.
+    pub name: String,
+    /// Mass density rho (kg/m^3) of the undeformed material.
+    pub density_kg_m3: f32,
+    /// Elasticity and plasticity.
+    pub model: Constitutive,
+}
+
+impl SolverMaterial {
+    /// Dilatational wave speed `sqrt((lambda + 2 mu) / rho)` (m/s), which bounds the time step.
+    pub fn wave_speed_m_s(&self) -> f32 {
+        let lame = self.model.lame();
+        ((lame.lambda + 2.0 * lame.mu) / self.density_kg_m3).sqrt()
+    }
+}
+
+/// How the time step is chosen.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum TimeStep {
+    /// `dt = cfl * dx / (c + max |v_p|)`, at most `max_dt_s`.
+    Adaptive { cfl: f32, max_dt_s: f32 },
+    /// A fixed step (s), whatever the CFL condition says.
+    Fixed { dt_s: f32 },
+}
+
+/// How particle velocities reach the grid (physics.md section 1).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Transfer {
+    /// Affine particle-in-cell (Jiang et al. 2015), MLS-MPM's: each particle carries its local
+    /// velocity field `v + C (x - x_p)`, which keeps angular momentum.
+    #[default]
+    Apic,
+    /// Plain particle-in-cell: only `v` is transferred (C is still the velocity gradient that
+    /// updates F), which damps every rotation and shear of the velocity field. For comparison.
+    Pic,
+}
+
+/// Everything the solver needs besides particles and materials.
+#[derive(Clone, Debug)]
+pub struct SolverSettings {
+    /// Grid node spacing (m).
+    pub dx: f32,
+    /// Min corner of the domain box (m); also the grid origin.
+    pub domain_min: Vector3<f32>,
+    /// Max corner of the domain box (m).
+    pub domain_max: Vector3<f32>,
+    /// How each wall of the box acts on the sand.
+    pub walls: Walls,
+    /// Gravitational acceleration (m/s^2).
+    pub gravity: Vector3<f32>,
+    pub time_step: TimeStep,
+    /// A particle faster than this (m/s) means the simulation has blown up.
+    pub blowup_speed_m_s: f32,
+    pub transfer: Transfer,
+    pub kernel: Kernel,
+    /// Sleeping sand (blocks at rest left out of the substep), or none: every particle is
+    /// stepped every substep.
+    pub sleep: Option<SleepSettings>,
+}

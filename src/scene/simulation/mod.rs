@@ -1,0 +1,388 @@
+//! One stepping interface over every kind of scene: an optional robot on a terrain (sand alone,
+//! the robot on rigid ground, on MPM sand coupled by CPIC, or on resistive force theory ground
+//! with `terrain.model: rft`). The node and the headless run both drive a [`Simulation`] and
+//! read its plain outputs (robot state, link poses, leg wrenches, the sand surface); they never
+//! see rapier or the solver's internals.
+
+mod leg_loads;
+mod terrain;
+
+use rapier3d::prelude::RigidBodyHandle;
+
+use super::bed::BedRule;
+use super::error::RunError;
+use super::robot_sand::{leg_sinkage_m, robot_coupling};
+use super::sand_window::SandWindow;
+use super::Scene;
+use crate::mpm::Solver;
+use crate::robot::geometry::{BODY_LINK, LEGS};
+use crate::robot::{GaitCommand, RobotSim, RobotState};
+use crate::terrain::rft::{robot_terrain, RftTerrain};
+use crate::terrain::TerrainModel;
+use leg_loads::LegLoads;
+pub use leg_loads::LegWrench;
+pub use terrain::{RftGround, SandTerrain, Terrain};
+
+/// Fastest the robot's body may move before the run is stopped as blown up (m/s): far above
+/// anything a walking robot does, far below what a diverging rigid-body solve produces.
+const ROBOT_BLOWUP_SPEED_M_S: f64 = 100.0;
+
+/// Pose of one link in the world (`odom`) frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LinkPose {
+    /// URDF link name.
+    pub link: String,
+    /// Link origin (m).
+    pub position_m: [f64; 3],
+    /// Orientation, unit quaternion `[x, y, z, w]`.
+    pub orientation_xyzw: [f64; 4],
+}
+
+/// Half side of the square of flat RFT surface that [`Simulation::sand_surface`] reports
+/// around the robot (m): the robot's footprint with margin.
+pub const RFT_SURFACE_HALF_SIDE_M: f32 = 0.2;
+
+/// A scene, built and ready to step: an optional robot on a terrain.
+pub struct Simulation {
+    robot: Option<Box<RobotSim>>,
+    terrain: Terrain,
+    /// The terrain's load on each leg since the last [`Simulation::take_leg_wrenches`].
+    leg_loads: LegLoads,
+    /// Substeps taken (sand substeps, or rapier steps without sand).
+    steps: u64,
+    /// Particle-steps taken (particles times sand substeps).
+    particle_steps: u64,
+}
+
+impl Simulation {
+    /// Builds the scene's terrain and robot at time 0.
+    pub fn new(scene: &Scene) -> Result<Self, RunError> {
+        let config = &scene.config;
+        let robot = match &config.robot {
+            Some(cfg) => Some(Box::new(RobotSim::new(cfg, config.gravity_m_s2)?)),
+            None => None,
+        };
+        let terrain = match (&robot, config.terrain.model) {
+            (Some(robot), TerrainModel::Rft) => {
+                // The `sand` section is not simulated: no solver, no particles.
+                Terrain::Rft(Box::new(RftGround {
+                    terrain: robot_terrain(robot, &config.terrain.rft)?,
+                    step_s: config.terrain.rft.step_s(),
+                }))
+            }
+            _ => match scene.build_solver() {
+                Some(solver) => {
+                    Terrain::Sand(Box::new(sand_terrain(scene, solver, robot.as_deref())?))
+                }
+                None if robot.is_some() => Terrain::RigidGround,
+                None => return Err(RunError::Empty(scene.file.display().to_string())),
+            },
+        };
+        Ok(Simulation {
+            robot,
+            terrain,
+            leg_loads: LegLoads::default(),
+            steps: 0,
+            particle_steps: 0,
+        })
+    }
+
+    /// Simulated time (s).
+    pub fn time_s(&self) -> f64 {
+        match (&self.terrain, &self.robot) {
+            (Terrain::Sand(sand), _) => sand.solver.time_s,
+            (_, Some(robot)) => robot.time_s(),
+            (_, None) => 0.0,
+        }
+    }
+
+    /// Advances to `target_s` seconds of simulated time (no-op if already there).
+    pub fn advance_to(&mut self, target_s: f64) -> Result<(), RunError> {
+        let Some(robot) = self.robot.as_deref_mut() else {
+            let Terrain::Sand(sand) = &mut self.terrain else {
+                return Ok(());
+            };
+            let steps = sand.solver.advance_to(target_s)?;
+            self.steps += steps;
+            self.particle_steps += steps * sand.solver.particles.len() as u64;
+            return Ok(());
+        };
+        if let Terrain::Sand(sand) = &mut self.terrain {
+            if let Some(window) = &mut sand.window {
+                window.follow(&mut sand.solver, robot_x_m(robot));
+            }
+        }
+        let mut plan = self.terrain.plan(robot, robot.time_s(), target_s);
+        while let Some(dt_s) = self.terrain.next_step_s(&mut plan, robot) {
+            let legs = self.terrain.step_robot(robot, dt_s)?;
+            self.leg_loads.add(&legs, dt_s);
+            check_robot(robot)?;
+            self.steps += 1;
+            if let Terrain::Sand(sand) = &self.terrain {
+                self.particle_steps += sand.solver.particles.len() as u64;
+            }
+        }
+        Ok(())
+    }
+
+    /// Gives the robot a new gait command, acting from the next step (no-op without a robot).
+    pub fn command(&mut self, cmd: GaitCommand) {
+        if let Some(robot) = self.robot.as_deref_mut() {
+            robot.command(cmd);
+        }
+    }
+
+    /// The robot, if the scene has one.
+    pub fn robot(&self) -> Option<&RobotSim> {
+        self.robot.as_deref()
+    }
+
+    /// What the robot walks on (or the sand alone).
+    pub fn terrain(&self) -> &Terrain {
+        &self.terrain
+    }
+
+    /// The sand solver, if the scene has sand.
+    pub fn solver(&self) -> Option<&Solver> {
+        self.terrain.sand().map(|sand| &sand.solver)
+    }
+
+    /// Where the sand bed falls short of the bed rule for the robot (`src/scene/bed.rs`): one
+    /// line per side; empty if it meets it or the scene has no robot on sand.
+    pub fn bed_shortfalls(&self) -> &[String] {
+        self.terrain
+            .sand()
+            .map_or(&[], |sand| sand.bed_shortfalls.as_slice())
+    }
+
+    /// The sand window following the robot (`sand.window`), if the scene has one.
+    pub fn sand_window(&self) -> Option<&SandWindow> {
+        self.terrain.sand().and_then(|sand| sand.window.as_deref())
+    }
+
+    /// The robot's state, if the scene has one.
+    pub fn robot_state(&self) -> Option<RobotState> {
+        self.robot().map(RobotSim::state)
+    }
+
+    /// World poses of the body (`base_link`) and every leg link, body first.
+    pub fn link_poses(&self) -> Vec<LinkPose> {
+        let Some(robot) = self.robot() else {
+            return Vec::new();
+        };
+        let bodies = &robot.world().bodies;
+        let pose = |name: String, h: RigidBodyHandle| {
+            let p = bodies[h].position();
+            let (t, r) = (p.translation, p.rotation);
+            LinkPose {
+                link: name,
+                position_m: [t.x as f64, t.y as f64, t.z as f64],
+                orientation_xyzw: [r.x as f64, r.y as f64, r.z as f64, r.w as f64],
+            }
+        };
+        std::iter::once(pose(BODY_LINK.to_string(), robot.body_handle()))
+            .chain(
+                LEGS.iter()
+                    .zip(robot.leg_handles())
+                    .map(|(leg, h)| pose(leg.link_name(), h)),
+            )
+            .collect()
+    }
+
+    /// The RFT terrain, if the robot walks on one (`terrain.model: rft`).
+    pub fn rft_terrain(&self) -> Option<&RftTerrain> {
+        match &self.terrain {
+            Terrain::Rft(rft) => Some(&rft.terrain),
+            _ => None,
+        }
+    }
+
+    /// Whether [`Self::take_leg_wrenches`] reports the terrain's forces on the legs (the robot on
+    /// MPM sand or on RFT terrain).
+    pub fn has_leg_wrenches(&self) -> bool {
+        self.robot.is_some() && !matches!(self.terrain, Terrain::RigidGround)
+    }
+
+    /// The terrain's (MPM sand's or RFT's) mean wrench on each leg since the last call, in each
+    /// leg link's frame; `None` on rigid ground or without a robot, and zero wrenches when no
+    /// time has passed. Resets the sums.
+    pub fn take_leg_wrenches(&mut self) -> Option<Vec<LegWrench>> {
+        if !self.has_leg_wrenches() {
+            return None;
+        }
+        let robot = self.robot.as_deref()?;
+        Some(self.leg_loads.take_mean(robot))
+    }
+
+    /// The top of the sand: for each `cell_m` x `cell_m` column that holds particles, the
+    /// highest particle (x, y of the column centre, z of that particle) (m). On RFT terrain, the
+    /// flat surface over the square of half side [`RFT_SURFACE_HALF_SIDE_M`] centred under the
+    /// robot. `None` without sand or RFT terrain.
+    pub fn sand_surface(&self, cell_m: f32) -> Option<Vec<[f32; 3]>> {
+        if let (Terrain::Rft(rft), Some(robot)) = (&self.terrain, self.robot()) {
+            let centre = robot.world().bodies[robot.body_handle()].translation();
+            let z = rft.terrain.params().surface_height_m as f32;
+            let n = (RFT_SURFACE_HALF_SIDE_M / cell_m).ceil().max(1.0) as i32;
+            let at = |k: i32| (k as f32 + 0.5) * cell_m;
+            return Some(
+                (-n..n)
+                    .flat_map(|j| (-n..n).map(move |i| (i, j)))
+                    .map(|(i, j)| [centre.x + at(i), centre.y + at(j), z])
+                    .collect(),
+            );
+        }
+        Some(surface_of(&self.solver()?.particles.position, cell_m))
+    }
+
+    /// Depth of the deepest leg point below the initial sand surface (MPM) or the RFT surface
+    /// (m); `None` without a robot on sand or RFT terrain.
+    pub fn leg_sinkage_m(&self) -> Option<f64> {
+        let robot = self.robot()?;
+        match &self.terrain {
+            Terrain::Sand(sand) => Some(leg_sinkage_m(robot, sand.surface_z_m)),
+            Terrain::Rft(rft) => Some(leg_sinkage_m(
+                robot,
+                rft.terrain.params().surface_height_m as f32,
+            )),
+            Terrain::RigidGround => None,
+        }
+    }
+
+    /// SHA-256 (hex) of the bits of the simulated state: the time, every particle's position,
+    /// velocity, affine matrix, deformation gradient and volume correction (in storage order),
+    /// and every rigid body's pose and velocity (in rapier's order). Two runs agree bit for bit
+    /// exactly when their digests agree (`docs/determinism.md`, `tests/determinism.rs`).
+    pub fn state_digest(&self) -> String {
+        use sha2::{Digest, Sha256};
+        let mut hash = Sha256::new();
+        let mut add = |values: &mut dyn Iterator<Item = f32>| {
+            for v in values {
+                hash.update(v.to_bits().to_le_bytes());
+            }
+        };
+        add(&mut std::iter::once(self.time_s() as f32));
+        if let Some(solver) = self.solver() {
+            let p = &solver.particles;
+            add(&mut p.position.iter().flat_map(|v| v.iter().copied()));
+            add(&mut p.velocity.iter().flat_map(|v| v.iter().copied()));
+            add(&mut p.affine.iter().flat_map(|m| m.iter().copied()));
+            add(&mut p.deformation.iter().flat_map(|m| m.iter().copied()));
+            add(&mut p.volume_correction.iter().copied());
+        }
+        if let Some(robot) = self.robot() {
+            for (_, rb) in robot.world().bodies.iter() {
+                let (t, r, v, w) = (rb.translation(), rb.rotation(), rb.linvel(), rb.angvel());
+                add(&mut [
+                    t.x, t.y, t.z, r.x, r.y, r.z, r.w, v.x, v.y, v.z, w.x, w.y, w.z,
+                ]
+                .into_iter());
+            }
+        }
+        format!("{:x}", hash.finalize())
+    }
+
+    /// Substeps taken so far.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// Particle-steps taken so far.
+    pub fn particle_steps(&self) -> u64 {
+        self.particle_steps
+    }
+}
+
+/// The sand of `scene` as terrain: with a robot, coupled to its colliders by CPIC, with the
+/// scene's sand window and the bed checked against the bed rule.
+fn sand_terrain(
+    scene: &Scene,
+    mut solver: Solver,
+    robot: Option<&RobotSim>,
+) -> Result<SandTerrain, RunError> {
+    let top = |solver: &Solver| {
+        solver
+            .particles
+            .position
+            .iter()
+            .map(|x| x.z)
+            .fold(f32::NEG_INFINITY, f32::max)
+    };
+    let Some(robot) = robot else {
+        return Ok(SandTerrain {
+            surface_z_m: top(&solver),
+            solver,
+            coupling: None,
+            window: None,
+            bed_shortfalls: Vec::new(),
+        });
+    };
+    let window = scene
+        .sand()
+        .and_then(|s| s.window)
+        .map(|w| Box::new(SandWindow::new(scene, w, &mut solver, robot_x_m(robot))));
+    let coupling = robot_coupling(robot, &scene.config.coupling, solver.grid().dx)?;
+    let bed_shortfalls = scene.bed_box_m().map_or(Vec::new(), |bed| {
+        BedRule::for_robot(robot, bed[1][2]).shortfalls(bed)
+    });
+    let surface_z_m = top(&solver);
+    Ok(SandTerrain {
+        solver,
+        coupling: Some(coupling),
+        surface_z_m,
+        window,
+        bed_shortfalls,
+    })
+}
+
+/// The top of the particles at `positions`, per `cell_m` column ([`Simulation::sand_surface`]).
+fn surface_of(positions: &[nalgebra::Vector3<f32>], cell_m: f32) -> Vec<[f32; 3]> {
+    let (mut min, mut max) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
+    for p in positions {
+        min = [min[0].min(p.x), min[1].min(p.y)];
+        max = [max[0].max(p.x), max[1].max(p.y)];
+    }
+    if positions.is_empty() {
+        return Vec::new();
+    }
+    let columns = |a: usize| ((max[a] - min[a]) / cell_m).floor() as usize + 1;
+    let (nx, ny) = (columns(0), columns(1));
+    let mut top = vec![f32::NEG_INFINITY; nx * ny];
+    for p in positions {
+        let i = (((p.x - min[0]) / cell_m) as usize).min(nx - 1);
+        let j = (((p.y - min[1]) / cell_m) as usize).min(ny - 1);
+        let z = &mut top[j * nx + i];
+        *z = z.max(p.z);
+    }
+    top.iter()
+        .enumerate()
+        .filter(|(_, z)| z.is_finite())
+        .map(|(k, &z)| {
+            let (i, j) = (k % nx, k / nx);
+            [
+                min[0] + (i as f32 + 0.5) * cell_m,
+                min[1] + (j as f32 + 0.5) * cell_m,
+                z,
+            ]
+        })
+        .collect()
+}
+
+/// The robot body's x position (m): what the sand window follows.
+fn robot_x_m(robot: &RobotSim) -> f32 {
+    robot.metrics().final_position_m[0] as f32
+}
+
+/// Stops a robot whose body has left the finite or plausible range.
+fn check_robot(robot: &RobotSim) -> Result<(), RunError> {
+    let rb = &robot.world().bodies[robot.body_handle()];
+    let (p, v) = (rb.translation(), rb.linvel());
+    let speed = v.length() as f64;
+    if !(p.is_finite() && speed.is_finite() && speed <= ROBOT_BLOWUP_SPEED_M_S) {
+        return Err(RunError::RobotBlowUp {
+            time_s: robot.time_s(),
+            position_m: [p.x, p.y, p.z],
+            speed_m_s: speed,
+        });
+    }
+    Ok(())
+}
