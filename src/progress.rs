@@ -19,6 +19,8 @@ pub trait ProgressDisplay: Send + Sync {
     fn skip_run(&self, duration_s: f64, line: &str);
     /// The job is over: nothing more to show.
     fn done(&self);
+    /// The job stopped on an error: leave what was shown as it is.
+    fn abandon(&self);
 }
 
 /// Where a job reports its progress: to a [`ProgressDisplay`], or nowhere (the default).
@@ -71,6 +73,20 @@ impl Progress {
         if let Some(d) = &self.0 {
             d.done();
         }
+    }
+
+    pub fn abandon(&self) {
+        if let Some(d) = &self.0 {
+            d.abandon();
+        }
+    }
+
+    /// Passes `result` through, abandoning the display first if it is an error.
+    pub fn abandon_on_error<T, E>(&self, result: Result<T, E>) -> Result<T, E> {
+        if result.is_err() {
+            self.abandon();
+        }
+        result
     }
 }
 

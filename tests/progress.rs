@@ -20,6 +20,7 @@ enum Report {
     Finish(f64),
     Skip(f64),
     Done,
+    Abandon,
 }
 
 impl Recorder {
@@ -46,6 +47,9 @@ impl ProgressDisplay for Recorder {
     }
     fn done(&self) {
         self.push(Report::Done);
+    }
+    fn abandon(&self) {
+        self.push(Report::Abandon);
     }
 }
 

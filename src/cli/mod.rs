@@ -1,7 +1,7 @@
 //! The command line: one file per group of commands, the options they share defined once
 //! (`options.rs`), and the progress bars drawn from the library's progress reports
-//! (`progress.rs`). The library below knows nothing of clap, the terminal or the exit code; the
-//! `sandstep` binary only calls [`main`].
+//! (`progress.rs`). The library below knows nothing of clap, progress bars or the exit code
+//! (it prints only warnings on stderr); the `sandstep` binary only calls [`main`].
 
 mod options;
 pub mod progress;

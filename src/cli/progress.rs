@@ -163,4 +163,11 @@ impl ProgressDisplay for Bars {
             bar.finish_and_clear();
         }
     }
+
+    fn abandon(&self) {
+        let state = self.state();
+        for bar in state.run.iter().chain(&state.series) {
+            bar.abandon();
+        }
+    }
 }

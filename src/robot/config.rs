@@ -102,8 +102,9 @@ pub struct GroundConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PhysicsConfig {
-    /// Largest rapier time step (s); `RobotSim::step(dt)` splits `dt` into
-    /// `ceil(dt / max_dt_s)` equal substeps. Default 0.001.
+    /// Largest rapier time step (s): on rigid ground a frame is split into `ceil(frame /
+    /// max_dt_s)` equal steps; on MPM sand it bounds the shared sand and rapier step. Not used
+    /// on RFT ground (`terrain.rft.max_dt_s`). Default 0.001.
     #[serde(default = "default_max_dt_s")]
     pub max_dt_s: f64,
     /// Rapier solver iterations (substeps of its soft-constraint solver) per step. Default 4.

@@ -271,14 +271,20 @@ impl RobotSim {
 
     /// Advances by `dt` seconds of simulated time in `ceil(dt / max_dt_s)` equal rapier steps.
     pub fn step(&mut self, dt: f32) {
-        let dt = dt as f64;
-        if dt.is_nan() || dt <= 0.0 {
-            return;
+        let (steps, step_s) = self.equal_steps(dt as f64);
+        for _ in 0..steps {
+            self.single_step(step_s);
         }
-        let substeps = (dt / self.max_dt_s).ceil().max(1.0);
-        for _ in 0..substeps as usize {
-            self.single_step(dt / substeps);
+    }
+
+    /// How [`Self::step`] splits `dt_s` seconds: `(count, seconds each)`, equal steps of at
+    /// most `max_dt_s`; none for a `dt_s` that is not positive.
+    pub fn equal_steps(&self, dt_s: f64) -> (u64, f64) {
+        if dt_s.is_nan() || dt_s <= 0.0 {
+            return (0, 0.0);
         }
+        let steps = (dt_s / self.max_dt_s).ceil().max(1.0);
+        (steps as u64, dt_s / steps)
     }
 
     /// Advances by one rapier step of `dt_s` seconds, whatever `max_dt_s`: for forces computed

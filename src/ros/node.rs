@@ -422,7 +422,7 @@ fn run_loop(
         if let Some(d) = opts.duration_s {
             target = target.min(d - session.publishing.time_offset_s);
         }
-        session.sim.advance_to(target)?;
+        progress.abandon_on_error(session.sim.advance_to(target))?;
         session.publishing.publish_due(&mut session.sim)?;
         if opts.realtime {
             let ahead = (session.now_s() - pace_origin.1) - pace_origin.0.elapsed().as_secs_f64();

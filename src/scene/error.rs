@@ -39,6 +39,8 @@ pub enum RunError {
         position_m: [f32; 3],
         speed_m_s: f64,
     },
-    #[error("recording at t = {time_s:.6} s: {source}")]
-    Observer { time_s: f64, source: ObserverError },
+    /// `error` is the observer's own (not `source`, so that a report with causes does not
+    /// print it twice).
+    #[error("recording at t = {time_s:.6} s: {error}")]
+    Observer { time_s: f64, error: ObserverError },
 }

@@ -106,9 +106,9 @@ pub fn run_scene_observed(
         write_snapshot(&out_dir, 0, &sim)?;
     }
     let observe = |sim: &mut Simulation, observer: &mut dyn Observer| {
-        observer.observe(sim).map_err(|source| RunError::Observer {
+        observer.observe(sim).map_err(|error| RunError::Observer {
             time_s: sim.time_s(),
-            source,
+            error,
         })
     };
     observe(&mut sim, observer)?;
@@ -128,7 +128,7 @@ pub fn run_scene_observed(
             break;
         }
         let target = (frame as f64 * frame_interval).min(duration);
-        sim.advance_to(target)?;
+        progress.abandon_on_error(sim.advance_to(target))?;
         frames_done += 1;
         sinkage_sum += sim.leg_sinkage_m().unwrap_or(0.0);
         progress.advance(target, || match sim.solver() {
@@ -138,7 +138,7 @@ pub fn run_scene_observed(
         if snapshots && frame % ply_every == 0 {
             write_snapshot(&out_dir, frame, &sim)?;
         }
-        observe(&mut sim, observer)?;
+        progress.abandon_on_error(observe(&mut sim, observer))?;
     }
     progress.done();
     let wall_time_s = wall.elapsed().as_secs_f64();

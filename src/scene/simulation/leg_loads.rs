@@ -19,13 +19,10 @@ pub struct BodyImpulse {
 /// An impulse (N s) and an angular impulse about a leg's link origin, its hip (N m s), world
 /// axes.
 #[derive(Clone, Copy, Debug, Default)]
-pub struct ImpulseSum {
-    pub linear_n_s: Vector3<f64>,
-    pub angular_n_m_s: Vector3<f64>,
+struct ImpulseSum {
+    linear_n_s: Vector3<f64>,
+    angular_n_m_s: Vector3<f64>,
 }
-
-/// One [`ImpulseSum`] per leg, in [`LEGS`] order.
-pub type LegImpulses = [ImpulseSum; LEG_COUNT];
 
 /// The sand's mean force and torque on one leg over an interval, in the leg link's frame.
 #[derive(Clone, Debug, PartialEq)]
@@ -36,19 +33,6 @@ pub struct LegWrench {
     pub force_n: [f64; 3],
     /// Torque about the link origin (the hip axis) (N m), leg link frame.
     pub torque_n_m: [f64; 3],
-}
-
-/// The impulses of one step that act on the legs, moved from each body's centre of mass to its
-/// link origin: `L_o = L_com + (com - o) x J`, in the order of `impulses` per leg.
-pub fn leg_impulses_at_hips(robot: &RobotSim, impulses: &[BodyImpulse]) -> LegImpulses {
-    let bodies = &robot.world().bodies;
-    let mut legs = LegImpulses::default();
-    for (sum, &h) in legs.iter_mut().zip(robot.leg_handles().iter()) {
-        for j in impulses.iter().filter(|j| j.body == h) {
-            add_at_link_origin(&bodies[h], j.linear_n_s, j.angular_n_m_s, sum);
-        }
-    }
-    legs
 }
 
 /// Adds an impulse (N s) and an angular impulse about the body's centre of mass (N m s), world
@@ -73,17 +57,21 @@ fn add_at_link_origin(
 /// The legs' impulses summed since the last report, and the time they were summed over.
 #[derive(Clone, Debug, Default)]
 pub struct LegLoads {
-    sums: LegImpulses,
+    sums: [ImpulseSum; LEG_COUNT],
     /// Simulated time summed over (s).
     time_s: f64,
 }
 
 impl LegLoads {
-    /// Adds one step of `dt_s` seconds.
-    pub fn add(&mut self, step: &LegImpulses, dt_s: f64) {
-        for (sum, j) in self.sums.iter_mut().zip(step) {
-            sum.linear_n_s += j.linear_n_s;
-            sum.angular_n_m_s += j.angular_n_m_s;
+    /// Adds one step of `dt_s` seconds: each impulse on a leg's body, moved from the body's
+    /// centre of mass to the leg's link origin (its hip), `L_o = L_com + (com - o) x J`, with
+    /// the links where they are before the step moves them.
+    pub fn add_step(&mut self, robot: &RobotSim, impulses: &[BodyImpulse], dt_s: f64) {
+        let bodies = &robot.world().bodies;
+        for (sum, &h) in self.sums.iter_mut().zip(robot.leg_handles().iter()) {
+            for j in impulses.iter().filter(|j| j.body == h) {
+                add_at_link_origin(&bodies[h], j.linear_n_s, j.angular_n_m_s, sum);
+            }
         }
         self.time_s += dt_s;
     }

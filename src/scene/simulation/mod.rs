@@ -114,8 +114,7 @@ impl Simulation {
         }
         let mut plan = self.terrain.plan(robot, robot.time_s(), target_s);
         while let Some(dt_s) = self.terrain.next_step_s(&mut plan, robot) {
-            let legs = self.terrain.step_robot(robot, dt_s)?;
-            self.leg_loads.add(&legs, dt_s);
+            self.terrain.step_robot(robot, dt_s, &mut self.leg_loads)?;
             check_robot(robot)?;
             self.steps += 1;
             if let Terrain::Sand(sand) = &self.terrain {

@@ -2,7 +2,7 @@
 //! CPIC, or resistive force theory, and the one function that puts a terrain's load on the
 //! robot and steps rapier by the same time ([`Terrain::step_robot`]).
 
-use super::leg_loads::{leg_impulses_at_hips, BodyImpulse, LegImpulses};
+use super::leg_loads::{BodyImpulse, LegLoads};
 use crate::coupling::Coupling;
 use crate::mpm::Solver;
 use crate::robot::RobotSim;
@@ -73,15 +73,8 @@ impl Terrain {
             }
             Terrain::RigidGround => {
                 // The frame in rapier's f32 time, in equal steps of at most robot.physics.max_dt_s.
-                let frame = ((until_s - now_s) as f32) as f64;
-                if frame.is_nan() || frame <= 0.0 {
-                    return StepPlan::Equal { left: 0, dt_s: 0.0 };
-                }
-                let steps = (frame / robot.max_dt_s()).ceil().max(1.0);
-                StepPlan::Equal {
-                    left: steps as u64,
-                    dt_s: frame / steps,
-                }
+                let (left, dt_s) = robot.equal_steps(((until_s - now_s) as f32) as f64);
+                StepPlan::Equal { left, dt_s }
             }
         }
     }
@@ -103,7 +96,8 @@ impl Terrain {
                     return None;
                 }
                 let remaining = (*until_s - solver.time_s) as f32;
-                let mut dt = solver.next_dt().min(remaining);
+                // One rapier step per sand substep: at most the robot's largest step too.
+                let mut dt = solver.next_dt().min(remaining).min(robot.max_dt_s() as f32);
                 if let Some(coupling) = &sand.coupling {
                     dt = dt.min(coupling.max_dt_s(&robot.world().bodies, solver.grid().dx));
                 }
@@ -115,13 +109,18 @@ impl Terrain {
     /// One step of `dt_s` seconds: the terrain's load on the robot over the step (the sand's
     /// CPIC substep, or the RFT forces with their implicit terms), then one rapier step of the
     /// same `dt_s`, which is what the load was computed for. This is the only place the two
-    /// meet. Returns the terrain's impulse on each leg over the step, about its hip.
-    pub fn step_robot(&mut self, robot: &mut RobotSim, dt_s: f64) -> Result<LegImpulses, RunError> {
+    /// meet. The terrain's impulse on each leg over the step is added to `leg_loads`.
+    pub fn step_robot(
+        &mut self,
+        robot: &mut RobotSim,
+        dt_s: f64,
+        leg_loads: &mut LegLoads,
+    ) -> Result<(), RunError> {
         let impulses = self.load(robot, dt_s)?;
         // Moved to the hips before the step moves the links.
-        let legs = leg_impulses_at_hips(robot, &impulses);
+        leg_loads.add_step(robot, &impulses, dt_s);
         robot.single_step(dt_s);
-        Ok(legs)
+        Ok(())
     }
 
     /// The terrain's load on the robot for a step of `dt_s` seconds, set as forces on its
