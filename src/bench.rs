@@ -73,6 +73,7 @@ pub fn sand_block(particles: usize) -> Solver {
         },
         blowup_speed_m_s: 100.0,
         transfer: Transfer::Apic,
+        flip_relaxation_s: 0.0,
         kernel: Kernel::QuadraticBspline,
         sleep: None,
     };

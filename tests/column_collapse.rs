@@ -47,3 +47,22 @@ fn high_aspect_ratio_runout_matches_the_power_law() {
         "runout {measured} vs {law}"
     );
 }
+
+/// AFLIP (`sand.solver.transfer: aflip`, a velocity deviation that relaxes at one rate per
+/// second) makes the runout stop following the substep count: at a = 1, dx = 3 mm, APIC runs
+/// out 1.006 at CFL 0.8 and 0.931 at CFL 0.4 (8 % apart; 0.823 at CFL 0.2), AFLIP 1.038 and
+/// 1.013 (2.4 %; 1.014 at CFL 0.2), measured 2026-12-02 (`docs/speed-vs-accuracy.md`).
+#[test]
+fn aflip_runout_does_not_follow_the_substep_count() {
+    let aflip = |cfl: &str| {
+        let cfl = format!("sand.solver.cfl={cfl}");
+        collapse(1.0, &["sand.solver.transfer=aflip", &cfl]).0
+    };
+    let (coarse, fine) = (aflip("0.8"), aflip("0.4"));
+    let change = (coarse - fine).abs() / fine;
+    assert!(
+        change < 0.05,
+        "runout {coarse} at CFL 0.8, {fine} at CFL 0.4: {:.1} % apart",
+        100.0 * change
+    );
+}

@@ -70,6 +70,10 @@ fn out_of_range_values() {
         ),
         ("sand.solver.cfl=1.5", "sand.solver.cfl"),
         (
+            "sand.solver.flip_relaxation_s=-1e-3",
+            "sand.solver.flip_relaxation_s",
+        ),
+        (
             "sand.domain.walls.z_min={friction: -1}",
             "sand.domain.walls.z_min",
         ),

@@ -82,6 +82,12 @@ pub fn validate(scene: &Scene) -> Result<(), SceneError> {
     if !(s.cfl > 0.0 && s.cfl <= 1.0) {
         return Err(scene.invalid("sand.solver.cfl", format!("{} must be in (0, 1]", s.cfl)));
     }
+    if !(s.flip_relaxation_s >= 0.0 && s.flip_relaxation_s.is_finite()) {
+        return Err(scene.invalid(
+            "sand.solver.flip_relaxation_s",
+            format!("{} must be a finite time >= 0 (s)", s.flip_relaxation_s),
+        ));
+    }
     positive("sand.solver.max_dt_s", s.max_dt_s as f64)?;
     positive("sand.solver.blowup_speed_m_s", s.blowup_speed_m_s as f64)?;
     if let Some(dt) = s.fixed_dt_s {
@@ -290,6 +296,7 @@ impl Scene {
             },
             blowup_speed_m_s: s.blowup_speed_m_s,
             transfer: s.transfer,
+            flip_relaxation_s: s.flip_relaxation_s,
             kernel: s.kernel,
             sleep: s.sleep.map(|c| SleepSettings {
                 speed_m_s: c.speed_m_s,

@@ -177,10 +177,15 @@ pub struct SolverConfig {
     #[serde(default = "default_blowup_speed")]
     pub blowup_speed_m_s: f32,
     /// Particle-grid transfer: `apic` (the default, MLS-MPM's affine transfer, which keeps
-    /// angular momentum) or `pic` (velocity only, dissipative; for comparison:
-    /// `docs/stability.md`).
+    /// angular momentum), `pic` (velocity only, dissipative; for comparison:
+    /// `docs/stability.md`) or `aflip` (APIC to the grid, a FLIP share back: Fei et al. 2021).
     #[serde(default)]
     pub transfer: Transfer,
+    /// With `transfer: aflip`, the relaxation time (s, >= 0) of a particle's velocity deviation
+    /// from the grid: each substep of dt keeps exp(-dt / tau) of it (0 is APIC's update).
+    /// Default 6.7e-4.
+    #[serde(default = "default_flip_relaxation")]
+    pub flip_relaxation_s: f32,
     /// Interpolation kernel: `quadratic_bspline` (the default) or `linear` (the tent, whose
     /// gradient jumps at cell boundaries; for comparison: `docs/stability.md`).
     #[serde(default)]
@@ -218,6 +223,9 @@ fn default_wake_margin() -> f32 {
     0.02
 }
 
+fn default_flip_relaxation() -> f32 {
+    6.7e-4
+}
 fn default_cfl() -> f32 {
     0.4
 }
@@ -236,6 +244,7 @@ impl Default for SolverConfig {
             fixed_dt_s: None,
             blowup_speed_m_s: default_blowup_speed(),
             transfer: Transfer::default(),
+            flip_relaxation_s: default_flip_relaxation(),
             kernel: Kernel::default(),
             sleep: None,
         }

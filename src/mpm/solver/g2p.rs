@@ -2,7 +2,8 @@
 //! (Hu et al. 2018, eq. 17 and 25), is advected, and keeps its affine matrix for the next P2G
 //! (APIC) or drops it (PIC). Near colliders, CPIC reads a ghost velocity at the nodes across a
 //! collider and pushes back a particle found slightly on the wrong side. The deformation
-//! gradient and the stress follow in `particle_update.rs`.
+//! gradient and the stress follow in `particle_update.rs`. With AFLIP the particle's velocity
+//! also keeps a share of its own deviation from the grid's (Fei et al. 2021).
 
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
@@ -13,7 +14,7 @@ use crate::mpm::cpic::{
     conflict_normal, conflicts, ghost_velocity, stencil_nodes, wall_distance, ColliderImpulse,
     ColliderMotion, PENALTY_MAX_CELLS, PENALTY_MIN_CELLS,
 };
-use crate::mpm::grid::{node_in_arena, ArenaSlot, ParticleBlock, SparseGrid, ARENA_NODES};
+use crate::mpm::grid::{node_in_arena, ArenaSlot, Block, ParticleBlock, SparseGrid, ARENA_NODES};
 use crate::mpm::kernel::{Kernel, Stencil};
 use crate::mpm::particles::Particles;
 use crate::mpm::simd::F4;
@@ -36,7 +37,11 @@ impl Solver {
             dx: self.settings.dx,
             lo: self.bounds[0],
             hi: self.bounds[1],
-            affine_transfer: self.settings.transfer == Transfer::Apic,
+            affine_transfer: self.settings.transfer != Transfer::Pic,
+            flip: (self.settings.transfer == Transfer::Aflip).then_some(Flip {
+                velocity_before_update: &self.velocity_before_update,
+                blend: flip_blend(dt, self.settings.flip_relaxation_s),
+            }),
             kernel: self.settings.kernel,
         };
         let blocks = &self.grid.particle_blocks;
@@ -66,9 +71,30 @@ struct G2pContext<'a> {
     /// The box particles are clamped into (m): the domain, or its x window.
     lo: Vector3<f32>,
     hi: Vector3<f32>,
-    /// Keep the affine matrix for the next P2G (APIC) or not (PIC).
+    /// Keep the affine matrix for the next P2G (APIC, AFLIP) or not (PIC).
     affine_transfer: bool,
+    /// AFLIP's FLIP increment, or none (APIC, PIC).
+    flip: Option<Flip<'a>>,
     kernel: Kernel,
+}
+
+/// What AFLIP's velocity update reads besides the updated grid.
+#[derive(Clone, Copy)]
+struct Flip<'a> {
+    /// Node velocities before the grid update (m/s), by grid block.
+    velocity_before_update: &'a [Block],
+    /// Share of the particle's own deviation kept this substep, `exp(-dt / tau)`.
+    blend: f32,
+}
+
+/// AFLIP's share of the velocity deviation kept over a substep of `dt` (s) for the relaxation
+/// time `tau_s` (s): `exp(-dt / tau)`, none for `tau_s = 0`.
+fn flip_blend(dt: f32, tau_s: f32) -> f32 {
+    if tau_s > 0.0 {
+        libm::expf(-dt / tau_s)
+    } else {
+        0.0
+    }
 }
 
 /// G2P of one particle block: loads its 6x6x6 arena of node velocities once, then per particle
@@ -90,14 +116,11 @@ fn grid_to_particle_block(
         lo,
         hi,
         affine_transfer,
+        flip,
         kernel,
     } = *cx;
-    let mut arena = [F4::splat(0.0); ARENA_NODES];
-    for (a, slot) in slots.iter().enumerate() {
-        arena[a] = F4::from_array(
-            grid.blocks[pb.arena_blocks[slot.block as usize] as usize][slot.node as usize],
-        );
-    }
+    let arena = load_arena(&grid.blocks, slots, pb);
+    let arena_before_update = flip.map(|f| load_arena(f.velocity_before_update, slots, pb));
     let mut impulses = Vec::new();
     let colour_arena = colours.arena(pb, slots);
     for i in 0..view.position.len() {
@@ -152,10 +175,31 @@ fn grid_to_particle_block(
             );
         }
         view.position[i] = x_new.sup(&lo).inf(&hi);
+        // AFLIP: the particle keeps a share of how its velocity differed from the grid's.
+        if let (Some(f), Some(before), None) = (flip, &arena_before_update, near_collider) {
+            let (v_before, _) = gather(before, &s, base);
+            v += (view.velocity[i] - v_before) * f.blend;
+        }
         view.velocity[i] = v;
         view.velocity_gradient[i] = c;
     }
     impulses
+}
+
+/// The 6x6x6 arena of node vectors around particle block `pb`, from `blocks` (the grid's, or
+/// a per-node array in the same block order).
+fn load_arena(
+    blocks: &[Block],
+    slots: &[ArenaSlot; ARENA_NODES],
+    pb: &ParticleBlock,
+) -> [F4; ARENA_NODES] {
+    let mut arena = [F4::splat(0.0); ARENA_NODES];
+    for (a, slot) in slots.iter().enumerate() {
+        arena[a] = F4::from_array(
+            blocks[pb.arena_blocks[slot.block as usize] as usize][slot.node as usize],
+        );
+    }
+    arena
 }
 
 /// Gathers `(sum w_i v_i, sum w_i v_i d_i^T)` over the 27 stencil nodes, `d_i` in cells. The

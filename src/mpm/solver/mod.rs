@@ -31,7 +31,9 @@ use nalgebra::{Matrix3, Vector3};
 
 use super::boundary::WallNodes;
 use super::cpic::{ColliderImpulse, ColliderMotion, ColourBlock};
-use super::grid::{arena_slots, ArenaSlot, ParticleBlock, SparseGrid, ARENA_NODES, BLOCK_EDGE};
+use super::grid::{
+    arena_slots, ArenaSlot, Block, ParticleBlock, SparseGrid, ARENA_NODES, BLOCK_EDGE,
+};
 use super::kernel::Stencil;
 use super::particles::{NewParticle, Particles, ReorderScratch};
 use super::sleep::{Sleep, SleepChanges, WakeZone};
@@ -67,6 +69,9 @@ pub struct Solver {
     /// Velocity gradient `C` of each particle (1/s), from G2P to the particle update of the same
     /// substep (the affine matrix kept for P2G is `C` under APIC and zero under PIC).
     velocity_gradient: Vec<Matrix3<f32>>,
+    /// AFLIP: each grid node's velocity before the grid update (m/s), zero where no mass, in
+    /// the order of the grid's blocks.
+    velocity_before_update: Vec<Block>,
     /// Which blocks sleep (`settings.sleep`).
     sleep: Option<Sleep>,
     /// Block wakes and sleeps so far.
@@ -108,6 +113,7 @@ impl Solver {
             colours: GridColours::default(),
             tagged: false,
             velocity_gradient: Vec::new(),
+            velocity_before_update: Vec::new(),
             max_speed_m_s: 0.0,
             time_s: 0.0,
             steps: 0,
@@ -269,6 +275,7 @@ impl Solver {
             + (self.keys.capacity() + self.order.capacity() + self.sorted_keys.capacity())
                 * std::mem::size_of::<u32>()
             + self.velocity_gradient.capacity() * std::mem::size_of::<Matrix3<f32>>()
+            + self.velocity_before_update.capacity() * std::mem::size_of::<Block>()
     }
 }
 

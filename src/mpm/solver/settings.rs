@@ -47,6 +47,16 @@ pub enum Transfer {
     /// Plain particle-in-cell: only `v` is transferred (C is still the velocity gradient that
     /// updates F), which damps every rotation and shear of the velocity field. For comparison.
     Pic,
+    /// Affine FLIP (AFLIP, Fei et al. 2021, "Revisiting integration in the material point
+    /// method", section 4): APIC's affine transfer to the grid; back on the particle, the grid's
+    /// velocity plus a share of the particle's own deviation from the grid velocity it came from,
+    /// `v_p <- sum w v_i' + blend (v_p - sum w v_i)`, so a transfer no longer filters the
+    /// velocity each substep. The share is `blend = exp(-dt / tau)` with the relaxation time
+    /// `tau` = [`SolverSettings::flip_relaxation_s`]: the deviation decays at one rate per
+    /// second whatever the step, where a fixed share per substep (Fei et al.'s) would decay
+    /// faster the more substeps. Positions move with the grid velocity `sum w v_i'`. Near
+    /// colliders, as with APIC, the CPIC transfer is plain PIC.
+    Aflip,
 }
 
 /// Everything the solver needs besides particles and materials.
@@ -66,6 +76,9 @@ pub struct SolverSettings {
     /// A particle faster than this (m/s) means the simulation has blown up.
     pub blowup_speed_m_s: f32,
     pub transfer: Transfer,
+    /// Relaxation time `tau` (s, >= 0) of a particle's velocity deviation from the grid under
+    /// [`Transfer::Aflip`]: each substep keeps `exp(-dt / tau)` of it (0 is APIC's update).
+    pub flip_relaxation_s: f32,
     pub kernel: Kernel,
     /// Sleeping sand (blocks at rest left out of the substep), or none: every particle is
     /// stepped every substep.

@@ -33,6 +33,7 @@ fn settings(gravity: Vector3<f32>, walls: Walls) -> SolverSettings {
         time_step: TimeStep::Fixed { dt_s: 1e-4 },
         blowup_speed_m_s: 100.0,
         transfer: Transfer::Apic,
+        flip_relaxation_s: 0.0,
         kernel: Kernel::QuadraticBspline,
         sleep: None,
     }
