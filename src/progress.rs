@@ -38,47 +38,40 @@ impl Progress {
         Progress(Some(display))
     }
 
-    pub fn plan(&self, durations_s: &[f64]) {
-        if let Some(d) = &self.0 {
-            d.plan(durations_s);
+    /// Calls `report` on the display, if any.
+    fn report(&self, report: impl FnOnce(&dyn ProgressDisplay)) {
+        if let Some(display) = &self.0 {
+            report(display.as_ref());
         }
     }
 
+    pub fn plan(&self, durations_s: &[f64]) {
+        self.report(|d| d.plan(durations_s));
+    }
+
     pub fn start_run(&self, name: &str, duration_s: Option<f64>) {
-        if let Some(d) = &self.0 {
-            d.start_run(name, duration_s);
-        }
+        self.report(|d| d.start_run(name, duration_s));
     }
 
     /// Reports `time_s`; `status` is only built when someone shows it.
     pub fn advance(&self, time_s: f64, status: impl FnOnce() -> String) {
-        if let Some(d) = &self.0 {
-            d.advance(time_s, &status());
-        }
+        self.report(|d| d.advance(time_s, &status()));
     }
 
     pub fn finish_run(&self, duration_s: f64, line: &str) {
-        if let Some(d) = &self.0 {
-            d.finish_run(duration_s, line);
-        }
+        self.report(|d| d.finish_run(duration_s, line));
     }
 
     pub fn skip_run(&self, duration_s: f64, line: &str) {
-        if let Some(d) = &self.0 {
-            d.skip_run(duration_s, line);
-        }
+        self.report(|d| d.skip_run(duration_s, line));
     }
 
     pub fn done(&self) {
-        if let Some(d) = &self.0 {
-            d.done();
-        }
+        self.report(|d| d.done());
     }
 
     pub fn abandon(&self) {
-        if let Some(d) = &self.0 {
-            d.abandon();
-        }
+        self.report(|d| d.abandon());
     }
 
     /// Passes `result` through, abandoning the display first if it is an error.

@@ -53,22 +53,12 @@ impl Json {
     }
 }
 
-/// `--duration S`.
-#[derive(clap::Args, Debug, Clone, Copy)]
-pub struct Duration {
-    /// Simulated time to run (s); overrides the scene's duration_s.
-    #[arg(long)]
-    pub duration: Option<f64>,
-}
-
-impl Duration {
-    /// The duration, checked to be a positive number of seconds.
-    pub fn checked(self) -> anyhow::Result<Option<f64>> {
-        if let Some(d) = self.duration {
-            anyhow::ensure!(d > 0.0 && d.is_finite(), "--duration must be > 0 seconds");
-        }
-        Ok(self.duration)
+/// `--duration S`, checked to be a positive number of seconds.
+pub fn check_duration(duration_s: Option<f64>) -> anyhow::Result<Option<f64>> {
+    if let Some(d) = duration_s {
+        anyhow::ensure!(d > 0.0 && d.is_finite(), "--duration must be > 0 seconds");
     }
+    Ok(duration_s)
 }
 
 /// Where a run records its bag.

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 
-use super::options::{stop_flag, BagArgs, Duration, Json, Overrides, Threads};
+use super::options::{check_duration, stop_flag, BagArgs, Json, Overrides, Threads};
 use super::progress::Bars;
 use crate::ros::NodeRunOptions;
 use crate::scene::{NoObserver, RunOptions, Scene};
@@ -18,8 +18,9 @@ const DEFAULT_NODE_SCENE: &str = "config/robot_on_sand.yaml";
 pub struct RunArgs {
     /// Scene file (YAML), e.g. config/column_collapse.yaml.
     scene: PathBuf,
-    #[command(flatten)]
-    duration: Duration,
+    /// Simulated time to run (s); overrides the scene's duration_s.
+    #[arg(long)]
+    duration: Option<f64>,
     #[command(flatten)]
     threads: Threads,
     #[command(flatten)]
@@ -58,7 +59,7 @@ pub struct NodeArgs {
 /// prints the summary.
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
     args.threads.apply()?;
-    let duration_s = args.duration.checked()?;
+    let duration_s = check_duration(args.duration)?;
     let scene = Scene::load(&args.scene, &args.overrides.overrides)?;
     let opts = RunOptions {
         duration_s,
@@ -100,10 +101,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
 /// Runs the scene as a ROS 2 node until stopped or `--duration`, and prints its summary.
 pub fn node(args: NodeArgs) -> anyhow::Result<()> {
     args.threads.apply()?;
-    let duration_s = Duration {
-        duration: args.duration,
-    }
-    .checked()?;
+    let duration_s = check_duration(args.duration)?;
     let file = args.scene.unwrap_or_else(default_node_scene);
     let scene = Scene::load(&file, &args.overrides.overrides)?;
     let opts = NodeRunOptions {

@@ -24,7 +24,7 @@ use crate::msgs::{
 use crate::progress::Progress;
 use crate::robot::GaitCommand;
 use crate::scene::config::ServiceMappingConfig;
-use crate::scene::run::RunError;
+use crate::scene::RunError;
 use crate::scene::{Scene, Simulation};
 
 /// Command topics, relative to the node's namespace.

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use super::publishing::{PublishError, Publishing};
 use crate::bag::{BagInfo, BagWriter};
-use crate::scene::run::RunError;
+use crate::scene::RunError;
 use crate::scene::{run_scene_observed, Observer, RunOptions, RunSummary, Scene};
 
 /// A finished run and its bag.

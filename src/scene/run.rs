@@ -8,7 +8,7 @@ use std::time::Instant;
 use serde::Serialize;
 use serde_json::{json, Map, Value};
 
-pub use super::error::{ObserverError, RunError};
+use super::error::{ObserverError, RunError};
 use super::simulation::Simulation;
 use super::Scene;
 use crate::analysis::collapse::{self, CollapseGeometry};

@@ -136,11 +136,6 @@ impl Simulation {
         self.robot.as_deref()
     }
 
-    /// What the robot walks on (or the sand alone).
-    pub fn terrain(&self) -> &Terrain {
-        &self.terrain
-    }
-
     /// The sand solver, if the scene has sand.
     pub fn solver(&self) -> Option<&Solver> {
         self.terrain.sand().map(|sand| &sand.solver)
