@@ -178,11 +178,13 @@ pub struct SolverConfig {
     pub blowup_speed_m_s: f32,
     /// Particle-grid transfer: `apic` (the default, MLS-MPM's affine transfer, which keeps
     /// angular momentum), `pic` (velocity only, dissipative; for comparison:
-    /// `docs/stability.md`) or `aflip` (APIC to the grid, a FLIP share back: Fei et al. 2021).
+    /// `docs/stability.md`) or `aflip` (APIC to the grid, a FLIP share back: Fei et al. 2021;
+    /// the runout of a collapse follows neither the substep count nor the stiffness).
     #[serde(default)]
     pub transfer: Transfer,
-    /// With `transfer: aflip`, the relaxation time (s, >= 0) of a particle's velocity deviation
-    /// from the grid: each substep of dt keeps exp(-dt / tau) of it (0 is APIC's update).
+    /// With `transfer: aflip`, the relaxation time (s, >= 0) of a particle's deviation from the
+    /// grid: each substep of dt keeps exp(-dt / tau) of its velocity's and its affine field's
+    /// rotation's, exp(-2 dt / tau) of its strain rate's (0 is APIC's update).
     /// Default 6.7e-4.
     #[serde(default = "default_flip_relaxation")]
     pub flip_relaxation_s: f32,

@@ -51,7 +51,8 @@ pub enum Transfer {
     /// method", section 4): APIC's affine transfer to the grid; back on the particle, the grid's
     /// velocity plus a share of the particle's own deviation from the grid velocity it came from,
     /// `v_p <- sum w v_i' + blend (v_p - sum w v_i)`, so a transfer no longer filters the
-    /// velocity each substep. The share is `blend = exp(-dt / tau)` with the relaxation time
+    /// velocity each substep. The affine field keeps the same share of its rotation's deviation
+    /// (so angular momentum is kept) and the share squared of its strain rate's. The share is `blend = exp(-dt / tau)` with the relaxation time
     /// `tau` = [`SolverSettings::flip_relaxation_s`]: the deviation decays at one rate per
     /// second whatever the step, where a fixed share per substep (Fei et al.'s) would decay
     /// faster the more substeps. Positions move with the grid velocity `sum w v_i'`. Near
@@ -76,8 +77,9 @@ pub struct SolverSettings {
     /// A particle faster than this (m/s) means the simulation has blown up.
     pub blowup_speed_m_s: f32,
     pub transfer: Transfer,
-    /// Relaxation time `tau` (s, >= 0) of a particle's velocity deviation from the grid under
-    /// [`Transfer::Aflip`]: each substep keeps `exp(-dt / tau)` of it (0 is APIC's update).
+    /// Relaxation time `tau` (s, >= 0) of a particle's deviation from the grid under
+    /// [`Transfer::Aflip`]: each substep keeps `exp(-dt / tau)` of its velocity's and its affine
+    /// field's rotation's, the square of that of its strain rate's (0 is APIC's update).
     pub flip_relaxation_s: f32,
     pub kernel: Kernel,
     /// Sleeping sand (blocks at rest left out of the substep), or none: every particle is
