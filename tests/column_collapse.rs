@@ -57,8 +57,14 @@ fn aflip_runout_follows_neither_the_substep_count_nor_the_stiffness() {
     let settings: [&[&str]; 4] = [
         &["sand.solver.cfl=0.2"],
         &["sand.solver.cfl=0.8"],
-        &["sand.solver.cfl=0.8", "sand.materials.sand.youngs_modulus_pa=1.0e5"],
-        &["sand.solver.cfl=0.8", "sand.materials.sand.youngs_modulus_pa=3.5e6"],
+        &[
+            "sand.solver.cfl=0.8",
+            "sand.materials.sand.youngs_modulus_pa=1.0e5",
+        ],
+        &[
+            "sand.solver.cfl=0.8",
+            "sand.materials.sand.youngs_modulus_pa=3.5e6",
+        ],
     ];
     let runouts: Vec<f64> = settings
         .iter()

@@ -332,7 +332,8 @@ fn pile_displacements_m(transfer: &str) -> Vec<f32> {
         let r = ((x.x - centre).powi(2) + (x.y - centre).powi(2)).sqrt();
         x.z < (PILE_RADIUS_M - r) * PILE_SLOPE_DEG.to_radians().tan()
     });
-    let mut start = vec![Vector3::zeros(); s.particles.id.iter().max().map_or(0, |&m| m as usize + 1)];
+    let mut start =
+        vec![Vector3::zeros(); s.particles.id.iter().max().map_or(0, |&m| m as usize + 1)];
     for (x, &id) in s.particles.position.iter().zip(&s.particles.id) {
         start[id as usize] = *x;
     }

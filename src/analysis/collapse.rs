@@ -159,7 +159,10 @@ mod tests {
         // cells, 1.5 cells over the 40 stretches. The length follows it within the spacing of
         // the last particles: measured, the largest change from one stretch to the next is 0.51
         // cells; with windows fixed to the cells it is 2.4 cells (1.5 with 4 steps a cell).
-        let largest_jump = lengths.windows(2).map(|p| (p[1] - p[0]).abs()).fold(0.0, f32::max);
+        let largest_jump = lengths
+            .windows(2)
+            .map(|p| (p[1] - p[0]).abs())
+            .fold(0.0, f32::max);
         assert!(largest_jump < 0.75 * g.dx, "{lengths:?}");
         assert!(lengths[40] > lengths[0], "{lengths:?}");
     }
