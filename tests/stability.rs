@@ -318,7 +318,7 @@ const PILE_RADIUS_M: f32 = 0.06;
 fn pile_displacements_m(transfer: &str) -> Vec<f32> {
     let (centre, height) = (0.08f32, PILE_RADIUS_M * PILE_SLOPE_DEG.to_radians().tan());
     let text = format!(
-        "name: pile\nduration_s: 2.0\ngravity_m_s2: [0, 0, -9.81]\nsand:\n  dx_m: 0.005\n  \
+        "name: pile\nduration_s: {PILE_WATCH_S}\ngravity_m_s2: [0, 0, -9.81]\nsand:\n  dx_m: 0.005\n  \
          domain:\n    min_m: [0, 0, 0]\n    max_m: [0.16, 0.16, 0.08]\n    walls: {{z_min: \
          {{friction: 0.5}}}}\n  solver: {{transfer: {transfer}}}\n  materials:\n    sand: \
          {SAND}\n  bodies: [{{material: sand, box: {{min_m: [0.02, 0.02, 0.0], max_m: [0.14, \

@@ -104,7 +104,7 @@ fn flip_blend(dt: f32, tau_s: f32) -> f32 {
 /// Angular momentum: APIC's round trip keeps `sum m (x x v + skew(C D))` (Jiang et al. 2015),
 /// so keeping the velocity's deviation and the affine field's rotation with the same share adds
 /// none. Keeping only the velocity's (as Fei et al. do) moved the spinning cube of
-/// `tests/stability.rs` by 2.7 % in 0.2 s.
+/// `tests/stability.rs` by 2.4 % in 0.2 s.
 ///
 /// The affine field's strain rate (its symmetric part) is kept with the share squared: it
 /// relaxes in half the time. Measured on the collapse of `tests/column_collapse.rs`
