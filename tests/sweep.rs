@@ -181,6 +181,13 @@ fn sweep_measures_cost_and_error_marks_the_pareto_front_and_records_failures() {
         let svg = std::fs::read_to_string(out.join(format!("{study}.svg"))).unwrap();
         assert!(svg.contains("Pareto front"), "{svg:.300}");
     }
+    // The collapse study's runouts beside the law: its two measured points, the robot's none.
+    let law_svg = std::fs::read_to_string(out.join("collapse_law.svg")).unwrap();
+    assert!(law_svg.contains("Lube et al. 2005"), "{law_svg:.300}");
+    for setting in ["baseline", "dx_m=0.008"] {
+        assert!(law_svg.contains(setting), "{setting} not labelled");
+    }
+    assert!(!out.join("robot_rft_law.svg").exists());
 }
 
 #[test]

@@ -528,6 +528,19 @@ mod tests {
     }
 
     #[test]
+    fn shipped_collapse_law_and_robot_stiffness_sweeps_load() {
+        let law = Sweep::load(Path::new("config/sweeps/collapse_law.yaml")).unwrap();
+        // The baseline (a = 1 at 3 mm) and eleven named settings, a = 0.5 to 8 at 3 and 2 mm.
+        assert_eq!(law.settings.len(), 12);
+        assert_eq!(law.settings[0].name, "baseline");
+        assert_eq!(law.settings[11].name, "a8_2mm");
+        let stiffness = Sweep::load(Path::new("config/sweeps/robot_stiffness.yaml")).unwrap();
+        // Per transfer: the stiff reference and the soft baseline, three starts each.
+        assert_eq!(stiffness.settings.len(), 4);
+        assert!(stiffness.settings.iter().all(|s| s.start_x_m.len() == 3));
+    }
+
+    #[test]
     fn errors_name_the_field() {
         let robot = error_of(ROBOT_STUDY);
         assert!(

@@ -351,6 +351,14 @@ pub fn run_sweep(sweep: &Sweep, opts: &SweepOptions) -> Result<SweepReport, Swee
             &note,
             &out,
         )?);
+        if study.quantity == Quantity::CollapseRunout {
+            files.extend(chart::write_law_chart(
+                &report.results,
+                &study.name,
+                &format!("{} threads", report.threads),
+                &out,
+            )?);
+        }
     }
     report.files = files.iter().map(|p| p.display().to_string()).collect();
     report.wall_time_s = wall.elapsed().as_secs_f64();
