@@ -575,7 +575,7 @@ mod tests {
     /// +x about -y. At +-150 degrees B folds back over (or under) A, leaving a 30-degree wedge.
     fn folded_sheet(fold_rad: f32) -> CpicSurface {
         let (l, hy) = (0.02f32, 0.01f32);
-        let far = [fold_rad.cos() * l, fold_rad.sin() * l];
+        let far = [libm::cosf(fold_rad) * l, libm::sinf(fold_rad) * l];
         let vertices = vec![
             [-l, -hy, 0.0],
             [0.0, -hy, 0.0],
@@ -597,9 +597,9 @@ mod tests {
             let fold = sign * 150f32.to_radians();
             let sheet = folded_sheet(fold);
             let n_a = Vec3::Z;
-            let n_b = Vec3::new(-fold.sin(), 0.0, fold.cos());
+            let n_b = Vec3::new(-libm::sinf(fold), 0.0, libm::cosf(fold));
             // Sanity: B's normal as built is what the fold implies.
-            let on_b = Vec3::new(0.014 * fold.cos(), 0.0, 0.014 * fold.sin());
+            let on_b = Vec3::new(0.014 * libm::cosf(fold), 0.0, 0.014 * libm::sinf(fold));
             let s = at(&sheet, (on_b + 1e-3 * n_b).to_array());
             assert!(s.positive_side && s.affinity);
             assert_normal(s.normal, n_b, "face B");
@@ -617,7 +617,7 @@ mod tests {
                 (160.0, false, true),
             ] {
                 let phi = sign * phi_deg.to_radians();
-                let p = [r * phi.cos(), 0.003, r * phi.sin()];
+                let p = [r * libm::cosf(phi), 0.003, r * libm::sinf(phi)];
                 let s = at(&sheet, p);
                 let want = positive_for_plus_fold == (sign > 0.0);
                 assert_eq!(s.positive_side, want, "fold {sign:+} phi {phi_deg}");

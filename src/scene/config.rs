@@ -6,6 +6,7 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Deserializer};
 
 use crate::mpm::kernel::Kernel;
+use crate::mpm::solver::DEFAULT_FLIP_RELAXATION_S;
 use crate::mpm::{Transfer, Wall};
 
 /// A whole scene file.
@@ -179,13 +180,13 @@ pub struct SolverConfig {
     /// Particle-grid transfer: `apic` (the default, MLS-MPM's affine transfer, which keeps
     /// angular momentum), `pic` (velocity only, dissipative; for comparison:
     /// `docs/stability.md`) or `aflip` (APIC to the grid, a FLIP share back: Fei et al. 2021;
-    /// the runout of a collapse follows neither the substep count nor the stiffness).
+    /// the runout of a collapse follows the substep count much less).
     #[serde(default)]
     pub transfer: Transfer,
     /// With `transfer: aflip`, the relaxation time (s, >= 0) of a particle's deviation from the
     /// grid: each substep of dt keeps exp(-dt / tau) of its velocity's and its affine field's
     /// rotation's, exp(-2 dt / tau) of its strain rate's (0 is APIC's update).
-    /// Default 6.7e-4.
+    /// Default 2e-3 (`DEFAULT_FLIP_RELAXATION_S`).
     #[serde(default = "default_flip_relaxation")]
     pub flip_relaxation_s: f32,
     /// Interpolation kernel: `quadratic_bspline` (the default) or `linear` (the tent, whose
@@ -226,7 +227,7 @@ fn default_wake_margin() -> f32 {
 }
 
 fn default_flip_relaxation() -> f32 {
-    6.7e-4
+    DEFAULT_FLIP_RELAXATION_S
 }
 fn default_cfl() -> f32 {
     0.4

@@ -39,7 +39,7 @@ impl Solver {
             hi: self.bounds[1],
             affine_transfer: self.settings.transfer != Transfer::Pic,
             flip: (self.settings.transfer == Transfer::Aflip).then_some(Flip {
-                velocity_before_update: &self.velocity_before_update,
+                transferred_velocity: &self.transferred_velocity,
                 blend: flip_blend(dt, self.settings.flip_relaxation_s),
             }),
             kernel: self.settings.kernel,
@@ -81,8 +81,11 @@ struct G2pContext<'a> {
 /// What AFLIP's velocity update reads besides the updated grid.
 #[derive(Clone, Copy)]
 struct Flip<'a> {
-    /// Node velocities before the grid update (m/s), by grid block.
-    velocity_before_update: &'a [Block],
+    /// Node velocities from the particles' transfer alone (m/s), by grid block: the grid
+    /// velocity the particle deviates from. (Measured against the node velocity with the
+    /// stress impulse in, a particle at rest kept `-a tau` for the stress's acceleration `a`,
+    /// and the sand under gravity pressed itself down with several g.)
+    transferred_velocity: &'a [Block],
     /// Share of the particle's own deviation kept this substep, `exp(-dt / tau)`.
     blend: f32,
 }
@@ -98,7 +101,7 @@ fn flip_blend(dt: f32, tau_s: f32) -> f32 {
 }
 
 /// What an AFLIP particle keeps of its deviation from the grid: velocity (m/s) and affine
-/// field (1/s), the particle's old value minus the grid's before the update gathered at the
+/// field (1/s), the particle's old value minus the grid's from the transfer alone gathered at the
 /// particle (Fei et al. 2021 keep the velocity's; the affine field's is kept here too).
 ///
 /// Angular momentum: APIC's round trip keeps `sum m (x x v + skew(C D))` (Jiang et al. 2015),
@@ -180,7 +183,7 @@ fn grid_to_particle_block(
         kernel,
     } = *cx;
     let arena = load_arena(&grid.blocks, slots, pb);
-    let arena_before_update = flip.map(|f| load_arena(f.velocity_before_update, slots, pb));
+    let arena_transferred = flip.map(|f| load_arena(f.transferred_velocity, slots, pb));
     let mut impulses = Vec::new();
     let colour_arena = colours.arena(pb, slots);
     for i in 0..view.position.len() {
@@ -212,16 +215,16 @@ fn grid_to_particle_block(
         // C_p = sum w v_i (x_i - x_p)^T D^-1, with offsets in cells.
         let c = scale_columns(&b, &(s.inverse_moment / dx));
         // AFLIP: the particle keeps a share of how its velocity and affine field differed from
-        // the grid's before the update (none near colliders).
-        let kept = match (flip, &arena_before_update, near_collider) {
-            (Some(f), Some(before), None) => {
-                let (v_before, b_before) = gather(before, &s, base);
-                let c_before = scale_columns(&b_before, &(s.inverse_moment / dx));
+        // the grid's its transfer gave, before forces (none near colliders).
+        let kept = match (flip, &arena_transferred, near_collider) {
+            (Some(f), Some(transferred), None) => {
+                let (v_transferred, b_transferred) = gather(transferred, &s, base);
+                let c_transferred = scale_columns(&b_transferred, &(s.inverse_moment / dx));
                 let inverse_moment = s.inverse_moment / (dx * dx);
                 let kept = KeptDeviation::new(
                     f.blend,
-                    view.velocity[i] - v_before,
-                    view.affine[i] - c_before,
+                    view.velocity[i] - v_transferred,
+                    view.affine[i] - c_transferred,
                     &inverse_moment,
                 );
                 Some(kept.with_spin_for_advection(&v, dt, &inverse_moment))

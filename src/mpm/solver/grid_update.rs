@@ -6,14 +6,14 @@ use rayon::prelude::*;
 
 use super::{Solver, Transfer};
 use crate::mpm::cpic::ColliderMotion;
-use crate::mpm::grid::{BLOCK_EDGE, BLOCK_NODES};
+use crate::mpm::grid::BLOCK_EDGE;
 
 impl Solver {
     /// Grid update: velocity from momentum, gravity, then the walls (and, for nodes coloured
     /// for the plain grid-boundary method, the imposed collider velocity).
     pub(super) fn update_grid(&mut self, dt: f32, colliders: &[ColliderMotion]) {
         if self.settings.transfer == Transfer::Aflip {
-            self.keep_velocity_before_update();
+            self.transferred_momentum_to_velocity();
         }
         let gravity = self.settings.gravity * dt;
         let walls = self.settings.walls;
@@ -62,25 +62,19 @@ impl Solver {
             });
     }
 
-    /// AFLIP: keeps each node's velocity `p_i / m_i` before the update (zero where no mass),
-    /// for G2P's FLIP increment.
-    fn keep_velocity_before_update(&mut self) {
-        let blocks = &self.grid.blocks;
-        self.velocity_before_update
-            .resize(blocks.len(), [[0.0; 4]; BLOCK_NODES]);
-        self.velocity_before_update
-            .par_iter_mut()
-            .zip(blocks.par_iter())
-            .for_each(|(before, block)| {
-                for (b, node) in before.iter_mut().zip(block) {
-                    let mass = node[3];
-                    *b = if mass > 0.0 {
-                        let v = Vector3::new(node[0], node[1], node[2]) / mass;
-                        [v.x, v.y, v.z, mass]
-                    } else {
-                        [0.0; 4]
-                    };
-                }
-            });
+    /// AFLIP: turns the momentum P2G's transfer alone left at each node into the node's
+    /// velocity `p_i / m_i` (zero where no mass), for G2P's deviation.
+    fn transferred_momentum_to_velocity(&mut self) {
+        self.transferred_velocity.par_iter_mut().for_each(|block| {
+            for node in block.iter_mut() {
+                let mass = node[3];
+                *node = if mass > 0.0 {
+                    let v = Vector3::new(node[0], node[1], node[2]) / mass;
+                    [v.x, v.y, v.z, mass]
+                } else {
+                    [0.0; 4]
+                };
+            }
+        });
     }
 }

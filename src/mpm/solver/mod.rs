@@ -39,7 +39,7 @@ use super::particles::{NewParticle, Particles, ReorderScratch};
 use super::sleep::{Sleep, SleepChanges, WakeZone};
 use cpic_grid::{add_impulses, GridColours};
 pub use error::SimError;
-pub use settings::{SolverMaterial, SolverSettings, TimeStep, Transfer};
+pub use settings::{SolverMaterial, SolverSettings, TimeStep, Transfer, DEFAULT_FLIP_RELAXATION_S};
 pub use stages::{Stage, StageTimes};
 
 /// The explicit MLS-MPM solver.
@@ -69,9 +69,10 @@ pub struct Solver {
     /// Velocity gradient `C` of each particle (1/s), from G2P to the particle update of the same
     /// substep (the affine matrix kept for P2G is `C` under APIC and zero under PIC).
     velocity_gradient: Vec<Matrix3<f32>>,
-    /// AFLIP: each grid node's velocity before the grid update (m/s), zero where no mass, in
-    /// the order of the grid's blocks.
-    velocity_before_update: Vec<Block>,
+    /// AFLIP: the velocity (m/s; momentum in P2G) each grid node gets from the particles'
+    /// transfer alone, `sum w m (v + C (x_i - x_p)) / m_i`, without the stress impulse,
+    /// gravity and walls; zero where no mass; in the order of the grid's blocks.
+    transferred_velocity: Vec<Block>,
     /// Which blocks sleep (`settings.sleep`).
     sleep: Option<Sleep>,
     /// Block wakes and sleeps so far.
@@ -113,7 +114,7 @@ impl Solver {
             colours: GridColours::default(),
             tagged: false,
             velocity_gradient: Vec::new(),
-            velocity_before_update: Vec::new(),
+            transferred_velocity: Vec::new(),
             max_speed_m_s: 0.0,
             time_s: 0.0,
             steps: 0,
@@ -275,7 +276,7 @@ impl Solver {
             + (self.keys.capacity() + self.order.capacity() + self.sorted_keys.capacity())
                 * std::mem::size_of::<u32>()
             + self.velocity_gradient.capacity() * std::mem::size_of::<Matrix3<f32>>()
-            + self.velocity_before_update.capacity() * std::mem::size_of::<Block>()
+            + self.transferred_velocity.capacity() * std::mem::size_of::<Block>()
     }
 }
 

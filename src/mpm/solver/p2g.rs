@@ -1,16 +1,17 @@
 //! P2G: each particle's mass and momentum, with the MLS-MPM stress and APIC affine terms fused
 //! (Hu et al. 2018, eq. 29), go to the 27 nodes of its stencil; near colliders, CPIC leaves out
-//! the nodes across a collider and hands what they would have received to the collider.
+//! the nodes across a collider and hands what they would have received to the collider. With
+//! AFLIP the mass and momentum without the stress term go to a second grid as well.
 
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
 use super::cpic_grid::{add_impulses, CpicParticle, CpicTransfer};
-use super::{local_base, scale_columns, Solver};
+use super::{local_base, scale_columns, Solver, Transfer};
 use crate::mpm::cpic::{
     conflict_normal, conflicts, stencil_nodes, ColliderImpulse, ColliderMotion,
 };
-use crate::mpm::grid::{node_in_arena, Block, ARENA_NODES};
+use crate::mpm::grid::{node_in_arena, Block, ARENA_NODES, BLOCK_NODES};
 use crate::mpm::kernel::Stencil;
 use crate::mpm::simd::F4;
 
@@ -24,6 +25,16 @@ impl Solver {
         colliders: &[ColliderMotion],
     ) -> Vec<ColliderImpulse> {
         let dx = self.settings.dx;
+        // AFLIP measures a particle's deviation against the grid velocity its transfer alone
+        // gives, without this substep's stress impulse: scattered a second time, stress left out.
+        let keep_transferred = self.settings.transfer == Transfer::Aflip;
+        if keep_transferred {
+            self.transferred_velocity.clear();
+            self.transferred_velocity
+                .resize(self.grid.blocks.len(), [[0.0; 4]; BLOCK_NODES]);
+        }
+        let transferred_blocks =
+            keep_transferred.then(|| SharedBlocks::new(&mut self.transferred_velocity));
         // Q_p = -dt V_p tau_p D^-1 + m_p C_p, applied to offsets measured in cells (D^-1 =
         // 4/dx^2 for the quadratic B-spline).
         let stress_scale = -dt / (dx * dx) * dx;
@@ -41,17 +52,22 @@ impl Solver {
                 .filter(|pb| pb.phase() == phase)
                 .map(|pb| {
                     let mut arena = [F4::splat(0.0); ARENA_NODES];
+                    let mut transferred_arena = transferred_blocks
+                        .as_ref()
+                        .map(|_| [F4::splat(0.0); ARENA_NODES]);
                     let colour_arena = colours.arena(pb, slots);
                     let mut block_impulses = Vec::new();
+                    let mut discarded_impulses = Vec::new();
                     for p in pb.start..pb.end {
                         let x = particles.position[p];
                         let s = Stencil::of(kernel, self.grid.to_grid(&x));
                         let m = particles.mass[p];
                         let momentum = particles.velocity[p] * m;
+                        let q_transfer = particles.affine[p] * (m * dx);
                         let q_cells = scale_columns(
                             &particles.stress[p],
                             &(s.inverse_moment * stress_scale * particles.volume[p]),
-                        ) + particles.affine[p] * (m * dx);
+                        ) + q_transfer;
                         let base = local_base(&s, pb);
                         let tags = particles.cpic_tags[p];
                         match &colour_arena {
@@ -77,8 +93,26 @@ impl Solver {
                                     &q_cells,
                                     &mut block_impulses,
                                 );
+                                if let Some(transferred) = &mut transferred_arena {
+                                    discarded_impulses
+                                        .resize(colliders.len(), ColliderImpulse::default());
+                                    scatter_cpic(
+                                        transferred,
+                                        &cx,
+                                        &s,
+                                        base,
+                                        &particle,
+                                        &q_transfer,
+                                        &mut discarded_impulses,
+                                    );
+                                }
                             }
-                            _ => scatter(&mut arena, &s, base, m, momentum, &q_cells),
+                            _ => {
+                                scatter(&mut arena, &s, base, m, momentum, &q_cells);
+                                if let Some(transferred) = &mut transferred_arena {
+                                    scatter(transferred, &s, base, m, momentum, &q_transfer);
+                                }
+                            }
                         }
                     }
                     for (a, slot) in slots.iter().enumerate() {
@@ -88,6 +122,17 @@ impl Solver {
                             unsafe { grid_blocks.get_mut(pb.arena_blocks[slot.block as usize]) };
                         let node = &mut block[slot.node as usize];
                         *node = (F4::from_array(*node) + arena[a]).to_array();
+                    }
+                    if let (Some(blocks), Some(transferred)) =
+                        (&transferred_blocks, &transferred_arena)
+                    {
+                        for (a, slot) in slots.iter().enumerate() {
+                            // SAFETY: as above; this array is laid out like the grid's blocks.
+                            let block =
+                                unsafe { blocks.get_mut(pb.arena_blocks[slot.block as usize]) };
+                            let node = &mut block[slot.node as usize];
+                            *node = (F4::from_array(*node) + transferred[a]).to_array();
+                        }
                     }
                     block_impulses
                 })

@@ -41,7 +41,9 @@ pub enum TimeStep {
 #[serde(rename_all = "snake_case")]
 pub enum Transfer {
     /// Affine particle-in-cell (Jiang et al. 2015), MLS-MPM's: each particle carries its local
-    /// velocity field `v + C (x - x_p)`, which keeps angular momentum.
+    /// velocity field `v + C (x - x_p)`, which keeps angular momentum. Every transfer loses
+    /// the flow's energy, so fewer substeps (softer sand, a larger CFL number) give a longer
+    /// collapse runout and a faster robot (docs/speed-vs-accuracy.md).
     #[default]
     Apic,
     /// Plain particle-in-cell: only `v` is transferred (C is still the velocity gradient that
@@ -49,16 +51,24 @@ pub enum Transfer {
     Pic,
     /// Affine FLIP (AFLIP, Fei et al. 2021, "Revisiting integration in the material point
     /// method", section 4): APIC's affine transfer to the grid; back on the particle, the grid's
-    /// velocity plus a share of the particle's own deviation from the grid velocity it came from,
-    /// `v_p <- sum w v_i' + blend (v_p - sum w v_i)`, so a transfer no longer filters the
-    /// velocity each substep. The affine field keeps the same share of its rotation's deviation
-    /// (so angular momentum is kept) and the share squared of its strain rate's. The share is `blend = exp(-dt / tau)` with the relaxation time
+    /// velocity plus a share of the particle's own deviation from the grid velocity its
+    /// transfer gave, `v_p <- sum w v_i' + blend (v_p - sum w v_i)` (`v_i` without the stress
+    /// impulse), so a transfer no longer filters the velocity each substep. The affine field
+    /// keeps the same share of its rotation's deviation (so angular momentum is kept) and the
+    /// share squared of its strain rate's. The share is `blend = exp(-dt / tau)` with the
+    /// relaxation time
     /// `tau` = [`SolverSettings::flip_relaxation_s`]: the deviation decays at one rate per
     /// second whatever the step, where a fixed share per substep (Fei et al.'s) would decay
     /// faster the more substeps. Positions move with the grid velocity `sum w v_i'`. Near
     /// colliders, as with APIC, the CPIC transfer is plain PIC.
     Aflip,
 }
+
+/// AFLIP's default relaxation time (s) of a particle's deviation from the grid
+/// ([`SolverSettings::flip_relaxation_s`]). Chosen by measurement (docs/speed-vs-accuracy.md):
+/// the quasi-2D collapse at a = 1, dx = 3 mm, CFL 0.2 to 0.8 and E 0.1 to 3.5 MPa spreads by
+/// 2.0 % at 2 ms, 3.9 % at 1.34 ms, 8.5 % at 0.67 ms and 12 % at 1 s (almost FLIP).
+pub const DEFAULT_FLIP_RELAXATION_S: f32 = 2.0e-3;
 
 /// Everything the solver needs besides particles and materials.
 #[derive(Clone, Debug)]
