@@ -11,7 +11,7 @@ use super::{local_base, scale_columns, Solver, Transfer};
 use crate::mpm::cpic::{
     conflict_normal, conflicts, stencil_nodes, ColliderImpulse, ColliderMotion,
 };
-use crate::mpm::grid::{node_in_arena, Block, ARENA_NODES, BLOCK_NODES};
+use crate::mpm::grid::{node_in_arena, ArenaSlot, Block, ParticleBlock, ARENA_NODES, BLOCK_NODES};
 use crate::mpm::kernel::Stencil;
 use crate::mpm::simd::F4;
 
@@ -115,24 +115,14 @@ impl Solver {
                             }
                         }
                     }
-                    for (a, slot) in slots.iter().enumerate() {
-                        // SAFETY: blocks of one phase have disjoint arenas (see
-                        // `ParticleBlock::phase`), so this block is written by no other task.
-                        let block =
-                            unsafe { grid_blocks.get_mut(pb.arena_blocks[slot.block as usize]) };
-                        let node = &mut block[slot.node as usize];
-                        *node = (F4::from_array(*node) + arena[a]).to_array();
-                    }
+                    // SAFETY: blocks of one phase have disjoint arenas (see
+                    // `ParticleBlock::phase`), so these blocks are written by no other task; the
+                    // transferred velocities are laid out like the grid's blocks.
+                    unsafe { grid_blocks.add_arena(&arena, pb, slots) };
                     if let (Some(blocks), Some(transferred)) =
                         (&transferred_blocks, &transferred_arena)
                     {
-                        for (a, slot) in slots.iter().enumerate() {
-                            // SAFETY: as above; this array is laid out like the grid's blocks.
-                            let block =
-                                unsafe { blocks.get_mut(pb.arena_blocks[slot.block as usize]) };
-                            let node = &mut block[slot.node as usize];
-                            *node = (F4::from_array(*node) + transferred[a]).to_array();
-                        }
+                        unsafe { blocks.add_arena(transferred, pb, slots) };
                     }
                     block_impulses
                 })
@@ -234,6 +224,23 @@ impl SharedBlocks {
         SharedBlocks {
             ptr: blocks.as_mut_ptr(),
             len: blocks.len(),
+        }
+    }
+
+    /// Adds the 6x6x6 `arena` of particle block `pb` to the blocks it covers.
+    ///
+    /// # Safety
+    /// No other task may touch those blocks meanwhile.
+    unsafe fn add_arena(
+        &self,
+        arena: &[F4; ARENA_NODES],
+        pb: &ParticleBlock,
+        slots: &[ArenaSlot; ARENA_NODES],
+    ) {
+        for (a, slot) in slots.iter().enumerate() {
+            let block = self.get_mut(pb.arena_blocks[slot.block as usize]);
+            let node = &mut block[slot.node as usize];
+            *node = (F4::from_array(*node) + arena[a]).to_array();
         }
     }
 
