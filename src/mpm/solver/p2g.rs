@@ -27,6 +27,13 @@ impl Solver {
         let dx = self.settings.dx;
         // AFLIP measures a particle's deviation against the grid velocity its transfer alone
         // gives, without this substep's stress impulse: scattered a second time, stress left out.
+        // Only particles away from colliders go there. Those near one keep no deviation (G2P
+        // gives them CPIC's PIC velocity), so the velocity they would add is not the reference
+        // of any deviation: counted, a particle beside the band kept the band's velocity
+        // difference from its own as a deviation that no one balanced, and a box thrown into
+        // sand lost a third of the momentum (tests/coupling.rs). Left out, the kept deviations
+        // sum to zero momentum: sum_p m_p sum_i w_ip v~_i = sum_i m~_i v~_i = sum_p m_p v_p over
+        // the particles away from colliders.
         let keep_transferred = self.settings.transfer == Transfer::Aflip;
         if keep_transferred {
             self.transferred_velocity.clear();
@@ -57,7 +64,6 @@ impl Solver {
                         .map(|_| [F4::splat(0.0); ARENA_NODES]);
                     let colour_arena = colours.arena(pb, slots);
                     let mut block_impulses = Vec::new();
-                    let mut discarded_impulses = Vec::new();
                     for p in pb.start..pb.end {
                         let x = particles.position[p];
                         let s = Stencil::of(kernel, self.grid.to_grid(&x));
@@ -93,19 +99,7 @@ impl Solver {
                                     &q_cells,
                                     &mut block_impulses,
                                 );
-                                if let Some(transferred) = &mut transferred_arena {
-                                    discarded_impulses
-                                        .resize(colliders.len(), ColliderImpulse::default());
-                                    scatter_cpic(
-                                        transferred,
-                                        &cx,
-                                        &s,
-                                        base,
-                                        &particle,
-                                        &q_transfer,
-                                        &mut discarded_impulses,
-                                    );
-                                }
+                                // Not into the transferred grid: see `particle_to_grid`.
                             }
                             _ => {
                                 scatter(&mut arena, &s, base, m, momentum, &q_cells);
