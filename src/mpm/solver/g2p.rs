@@ -81,8 +81,8 @@ struct G2pContext<'a> {
 /// What AFLIP's velocity update reads besides the updated grid.
 #[derive(Clone, Copy)]
 struct Flip<'a> {
-    /// Node velocities from the particles' transfer alone (m/s), by grid block: the grid
-    /// velocity the particle deviates from. (Measured against the node velocity with the
+    /// Node velocities from the transfer alone of the particles away from colliders (m/s), by
+    /// grid block: the grid velocity the particle deviates from. (Measured against the node velocity with the
     /// stress impulse in, a particle at rest kept `-a tau` for the stress's acceleration `a`,
     /// and the sand under gravity pressed itself down with several g.)
     transferred_velocity: &'a [Block],

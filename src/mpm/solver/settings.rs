@@ -56,9 +56,9 @@ pub enum Transfer {
     /// impulse), so a transfer no longer filters the velocity each substep. The affine field
     /// keeps the same share of its rotation's deviation (so angular momentum is kept) and the
     /// share squared of its strain rate's. The share is `blend = exp(-dt / tau)` with the
-    /// relaxation time `tau` = [`SolverSettings::flip_relaxation_s`]: the deviation decays at one rate per
-    /// second whatever the step, where a fixed share per substep (Fei et al.'s) would decay
-    /// faster the more substeps. Positions move with the grid velocity `sum w v_i'`. Near
+    /// relaxation time `tau` = [`SolverSettings::flip_relaxation_s`]: the deviation decays at
+    /// one rate per second whatever the step, where a fixed share per substep (Fei et al.'s)
+    /// would decay faster the more substeps. Positions move with the grid velocity `sum w v_i'`. Near
     /// colliders, as with APIC, the CPIC transfer is plain PIC.
     Aflip,
 }
