@@ -93,8 +93,10 @@ fn sweep_measures_cost_and_error_marks_the_pareto_front_and_records_failures() {
         f(fine, "relative_error") < f(coarse, "relative_error") - 0.02,
         "6 mm {fine}\n8 mm {coarse}"
     );
-    assert!(f(fine, "wall_time_per_sim_s") > f(coarse, "wall_time_per_sim_s"));
+    // The price in work, not wall time (which tests never compare): particle-substeps.
+    let work = |r: &Value| f(r, "particles") * f(r, "substeps");
     assert!(f(fine, "particles") > f(coarse, "particles"));
+    assert!(work(fine) > work(coarse), "6 mm {fine}\n8 mm {coarse}");
     // A fixed step far beyond the CFL limit blows up: recorded, and the sweep went on.
     let blown = row("collapse", "beyond_cfl");
     let status = blown["status"].as_str().unwrap();

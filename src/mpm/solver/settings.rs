@@ -66,7 +66,8 @@ pub enum Transfer {
 /// AFLIP's default relaxation time (s) of a particle's deviation from the grid
 /// ([`SolverSettings::flip_relaxation_s`]). Chosen by measurement (docs/speed-vs-accuracy.md):
 /// the quasi-2D collapse at a = 1, dx = 3 mm, CFL 0.2 to 0.8 and E 0.1 to 3.5 MPa spreads by
-/// 2.0 % at 2 ms, 3.9 % at 1.34 ms, 8.5 % at 0.67 ms and 12 % at 1 s (almost FLIP).
+/// 2.0 % at 2 ms (1.3 % with the deposit's toe counted), 3.9 % at 1.34 ms, 8.5 % at 0.67 ms
+/// and 12 % at 1 s (almost FLIP).
 pub const DEFAULT_FLIP_RELAXATION_S: f32 = 2.0e-3;
 
 /// Everything the solver needs besides particles and materials.
