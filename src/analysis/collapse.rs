@@ -178,7 +178,11 @@ mod tests {
         let g = test_channel();
         let s = 0.5 * g.dx;
         let grain = |i: usize, j: usize, k: usize| {
-            Vector3::new((i as f32 + 0.5) * s, (j as f32 + 0.5) * s, (k as f32 + 0.5) * s)
+            Vector3::new(
+                (i as f32 + 0.5) * s,
+                (j as f32 + 0.5) * s,
+                (k as f32 + 0.5) * s,
+            )
         };
         let mut pts = Vec::new();
         for j in 0..4 {
