@@ -10,6 +10,7 @@ use crate::mpm::kernel::Kernel;
 use crate::mpm::material::{Constitutive, DruckerPrager, Lame};
 use crate::mpm::{
     NewParticle, Solver, SolverMaterial, SolverSettings, TimeStep, Transfer, Wall, Walls,
+    DEFAULT_FLIP_RELAXATION_S,
 };
 
 /// Benchmark sand: Klar et al. (2016) parameters.
@@ -72,8 +73,8 @@ pub fn sand_block(particles: usize) -> Solver {
             max_dt_s: 1e-3,
         },
         blowup_speed_m_s: 100.0,
-        transfer: Transfer::Apic,
-        flip_relaxation_s: 0.0,
+        transfer: Transfer::default(),
+        flip_relaxation_s: DEFAULT_FLIP_RELAXATION_S,
         kernel: Kernel::QuadraticBspline,
         sleep: None,
     };

@@ -231,8 +231,10 @@ fn dropped_sphere_sinks_and_comes_to_rest() {
         z_end - radius > 0.005,
         "the ball must not sink to the floor"
     );
-    // At rest: the largest speed from 0.4 s on is jitter, 0.0114 +- 0.0028 m/s over four starts
-    // 7 um apart (2026-12-02), 2 % of the impact speed; the bound is 4.9 spreads above it.
+    // At rest: the largest speed in (0.4, 0.5] s is jitter, 0.0088 +- 0.0005 m/s over four
+    // starts 7 um apart (2026-12-03, AFLIP, the default; APIC 0.0114 +- 0.0028), under 2 % of
+    // the impact speed; the bound is far above it (34 spreads) and far below the bounces'
+    // 0.09 m/s in (0.25, 0.35] s.
     assert!(
         late_speed < 0.025,
         "the ball must come to rest (speed {late_speed} m/s)"
@@ -260,37 +262,30 @@ fn light_body_rests_on_sand_without_jitter() {
         &world.bodies,
     )
     .unwrap();
-    // Settling, then two windows 0.1 s long and 0.1 s apart.
-    run_world(&mut sand, &coupling, &mut world, 0.3, plate, 0.3);
-    let early = run_world(&mut sand, &coupling, &mut world, 0.4, plate, 0.3);
-    run_world(&mut sand, &coupling, &mut world, 0.5, plate, 0.5);
-    let late = run_world(&mut sand, &coupling, &mut world, 0.6, plate, 0.5);
+    // Settling, then the rocking watched over (0.6, 1.0] s.
+    run_world(&mut sand, &coupling, &mut world, 0.6, plate, 0.6);
+    let late = run_world(&mut sand, &coupling, &mut world, 1.0, plate, 0.6);
     let z = world.bodies[plate].translation().z;
-    let growth = late.rms_spin_rad_s / early.rms_spin_rad_s;
     println!(
-        "2 g plate: speed <= {:.4} m/s, spin <= {:.3} rad/s, rms spin {:.3} rad/s in (0.3, \
-         0.4] s and {:.3} rad/s in (0.5, 0.6] s (x{growth:.3}), z {z:.4} m",
-        late.fastest_m_s, late.max_spin_rad_s, early.rms_spin_rad_s, late.rms_spin_rad_s
+        "2 g plate in (0.6, 1.0] s: speed <= {:.4} m/s, spin <= {:.3} rad/s, rms spin {:.3} \
+         rad/s, z {z:.4} m",
+        late.fastest_m_s, late.max_spin_rad_s, late.rms_spin_rad_s
     );
-    // Measured (2026-12-02) from eight starts 0.7 mm apart: the plate settles into a steady
-    // rocking by 0.3 s, bounded; at this start, edges and bottom on node planes, 1.03 rad/s rms
-    // (at most 1.63, edges below 5.3 mm/s), elsewhere 0.15-0.17 rad/s rms. The rms spin of the
-    // later window over the earlier: 0.99 +- 0.036 (one start's spread), so the bound 1.25 is 7
-    // spreads away; a growing instability doubles it within a window.
+    // Measured (2026-12-03, AFLIP, the default): at this start, edges and bottom on node
+    // planes, the plate keeps rocking, bounded: the rms spin of 0.1 s windows wanders between
+    // 0.18 and 1.25 rad/s up to 1 s (APIC: a steady 1.03). Over (0.6, 1.0] s at four starts 7 um
+    // apart: rms spin 0.76 +- 0.19 rad/s, fastest 6.9 +- 1.3 mm/s; the bounds are 6.4 and
+    // 6.2 spreads away. A growing instability of the explicit exchange doubles the spin
+    // within a window. (The ratio of two windows' rms spin, the earlier statistic, is
+    // 0.94 to 4.3 at these starts with AFLIP: the wandering, not growth.)
     assert!(
-        late.fastest_m_s < 0.01,
+        late.fastest_m_s < 0.015,
         "the plate jitters at {} m/s",
         late.fastest_m_s
     );
     assert!(
-        late.max_spin_rad_s < 5.0,
-        "the plate spins at {} rad/s",
-        late.max_spin_rad_s
-    );
-    assert!(
-        growth < 1.25,
-        "rocking grows: rms spin {} -> {} rad/s",
-        early.rms_spin_rad_s,
+        late.rms_spin_rad_s < 2.0,
+        "the plate rocks at {} rad/s rms",
         late.rms_spin_rad_s
     );
     assert!(

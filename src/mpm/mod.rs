@@ -20,4 +20,5 @@ pub use particles::{NewParticle, Particles};
 pub use sleep::SleepSettings;
 pub use solver::{
     SimError, Solver, SolverMaterial, SolverSettings, Stage, StageTimes, TimeStep, Transfer,
+    DEFAULT_FLIP_RELAXATION_S,
 };

@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Deserializer};
 
 use crate::mpm::kernel::Kernel;
-use crate::mpm::solver::DEFAULT_FLIP_RELAXATION_S;
+use crate::mpm::DEFAULT_FLIP_RELAXATION_S;
 use crate::mpm::{Transfer, Wall};
 
 /// A whole scene file.
@@ -177,10 +177,11 @@ pub struct SolverConfig {
     /// A particle faster than this (m/s) stops the run as a blow-up. Default 100.
     #[serde(default = "default_blowup_speed")]
     pub blowup_speed_m_s: f32,
-    /// Particle-grid transfer: `apic` (the default, MLS-MPM's affine transfer, which keeps
-    /// angular momentum), `pic` (velocity only, dissipative; for comparison:
-    /// `docs/stability.md`) or `aflip` (APIC to the grid, a FLIP share back: Fei et al. 2021;
-    /// the runout of a collapse follows the substep count much less).
+    /// Particle-grid transfer: `aflip` (the default: APIC to the grid, the particle's own
+    /// deviation from the grid kept back, Fei et al. 2021; the collapse's runout follows
+    /// neither the substep count nor the stiffness), `apic` (MLS-MPM's affine transfer, which
+    /// loses flow energy at every substep) or `pic` (velocity only, dissipative; for
+    /// comparison: `docs/stability.md`).
     #[serde(default)]
     pub transfer: Transfer,
     /// With `transfer: aflip`, the relaxation time (s, >= 0) of a particle's deviation from the

@@ -535,9 +535,14 @@ mod tests {
         assert_eq!(law.settings[0].name, "baseline");
         assert_eq!(law.settings[11].name, "a8_2mm");
         let stiffness = Sweep::load(Path::new("config/sweeps/robot_stiffness.yaml")).unwrap();
-        // Per transfer: the stiff reference and the soft baseline; with AFLIP also CFL 0.2
-        // (reference), 0.4 (baseline) and 0.8; three starts each.
-        assert_eq!(stiffness.settings.len(), 7);
+        // Per transfer: the stiff reference and the soft baseline, with AFLIP also the soft
+        // sand at the stiff sand's step; CFL 0.2 (reference), 0.4 (baseline) and 0.8 with
+        // AFLIP; three starts each.
+        assert_eq!(stiffness.settings.len(), 8);
+        assert!(stiffness
+            .settings
+            .iter()
+            .any(|s| s.name == "soft_at_the_stiff_step"));
         assert!(stiffness.settings.iter().all(|s| s.start_x_m.len() == 3));
     }
 

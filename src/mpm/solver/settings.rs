@@ -42,9 +42,8 @@ pub enum TimeStep {
 pub enum Transfer {
     /// Affine particle-in-cell (Jiang et al. 2015), MLS-MPM's: each particle carries its local
     /// velocity field `v + C (x - x_p)`, which keeps angular momentum. Every transfer loses
-    /// the flow's energy, so fewer substeps (softer sand, a larger CFL number) give a longer
-    /// collapse runout and a faster robot (docs/speed-vs-accuracy.md).
-    #[default]
+    /// part of the flow's energy, so fewer substeps (softer sand, a larger CFL number) give a
+    /// longer collapse runout (docs/speed-vs-accuracy.md). The default until 2026-12-03.
     Apic,
     /// Plain particle-in-cell: only `v` is transferred (C is still the velocity gradient that
     /// updates F), which damps every rotation and shear of the velocity field. For comparison.
@@ -59,7 +58,9 @@ pub enum Transfer {
     /// relaxation time `tau` = [`SolverSettings::flip_relaxation_s`]: the deviation decays at
     /// one rate per second whatever the step, where a fixed share per substep (Fei et al.'s)
     /// would decay faster the more substeps. Positions move with the grid velocity `sum w v_i'`. Near
-    /// colliders, as with APIC, the CPIC transfer is plain PIC.
+    /// colliders, as with APIC, the CPIC transfer is plain PIC. The default:
+    /// chosen by measurement (docs/speed-vs-accuracy.md, issue 19).
+    #[default]
     Aflip,
 }
 
