@@ -8,6 +8,7 @@ use serde_json::{Map, Value};
 
 use crate::mpm::kernel::Kernel;
 use crate::mpm::material::{Constitutive, DruckerPrager, Lame};
+use crate::mpm::simd::InstructionSet;
 use crate::mpm::{
     NewParticle, Solver, SolverMaterial, SolverSettings, TimeStep, Transfer, Wall, Walls,
     DEFAULT_FLIP_RELAXATION_S,
@@ -30,6 +31,10 @@ const WARMUP_STEPS: u64 = 5;
 pub struct BenchReport {
     pub particles: usize,
     pub threads: usize,
+    /// Instruction set of the wide loops (`avx512`, `avx2`, `portable`).
+    pub instruction_set: String,
+    /// Lanes of the wide loops.
+    pub lanes: usize,
     pub steps: u64,
     pub wall_time_s: f64,
     /// Particle-substeps per wall-clock second, whole substep.
@@ -101,9 +106,14 @@ pub fn sand_block(particles: usize) -> Solver {
     solver
 }
 
-/// Runs the benchmark on the current rayon pool.
-pub fn run(particles: usize, steps: u64) -> Result<BenchReport, crate::mpm::SimError> {
+/// Runs the benchmark on the current rayon pool with the wide loops on `instruction_set`.
+pub fn run(
+    particles: usize,
+    steps: u64,
+    instruction_set: InstructionSet,
+) -> Result<BenchReport, crate::mpm::SimError> {
     let mut solver = sand_block(particles);
+    solver.set_instruction_set(instruction_set);
     for _ in 0..WARMUP_STEPS {
         solver.substep()?;
     }
@@ -129,6 +139,8 @@ pub fn run(particles: usize, steps: u64) -> Result<BenchReport, crate::mpm::SimE
     Ok(BenchReport {
         particles: n,
         threads: rayon::current_num_threads(),
+        instruction_set: instruction_set.name().to_string(),
+        lanes: instruction_set.lanes(),
         steps,
         wall_time_s,
         particle_steps_per_s: work / wall_time_s,

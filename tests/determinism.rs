@@ -8,7 +8,7 @@
 //! - **Code paths**: one coupled robot-on-sand run gives the same digest on 1, 2 and 3 threads,
 //!   with glibc's CPU-specific variants masked, and on emulated CPUs (qemu user mode: a CPU
 //!   without AVX, and one with AVX2 and FMA but without AVX-512), which is what another machine
-//!   would run.
+//!   would run; and with every SIMD instruction set this CPU has forced (`SANDSTEP_SIMD`).
 
 use std::path::Path;
 use std::process::Command;
@@ -210,6 +210,43 @@ fn thread_count_and_glibc_variants_do_not_change_the_bits() {
     let masked = summary(masked, "with glibc's AVX/FMA variants masked");
     assert_eq!(digest(&masked), digest(&reference), "{GLIBC_MASK}");
     assert_eq!(masked["metrics"], reference["metrics"]);
+}
+
+/// The wide loops give the same bits with every instruction set (`SANDSTEP_SIMD`), and a name
+/// the CPU or the program does not know is refused before any work, naming the variable.
+#[test]
+fn every_simd_instruction_set_gives_the_same_bits() {
+    let reference = native(&PATHS, 2);
+    let mut tried = Vec::new();
+    for name in ["avx512", "avx2", "portable"] {
+        let mut cmd = run_command(env!("CARGO_BIN_EXE_sandstep"), &[], &PATHS, 2);
+        cmd.env("SANDSTEP_SIMD", name);
+        let output = cmd.output().expect("run sandstep");
+        if !output.status.success() {
+            let stderr = String::from_utf8_lossy(&output.stderr);
+            // Only a CPU without it may refuse an instruction set, and it must say so.
+            assert!(
+                name != "portable" && stderr.contains("SANDSTEP_SIMD") && stderr.contains(name),
+                "SANDSTEP_SIMD={name}: {stderr}"
+            );
+            continue;
+        }
+        let run: Value = serde_json::from_slice(&output.stdout).expect("JSON summary");
+        assert_eq!(digest(&run), digest(&reference), "SANDSTEP_SIMD={name}");
+        tried.push(name);
+    }
+    eprintln!("instruction sets compared: {tried:?}");
+    assert!(tried.contains(&"portable"));
+    let mut bad = run_command(env!("CARGO_BIN_EXE_sandstep"), &[], &PATHS, 2);
+    let output = bad
+        .env("SANDSTEP_SIMD", "sse9")
+        .output()
+        .expect("run sandstep");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        !output.status.success() && stderr.contains("SANDSTEP_SIMD") && stderr.contains("sse9")
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
 }
 
 /// The qemu user-mode emulator, or a panic that says how to get it.

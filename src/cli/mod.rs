@@ -50,7 +50,13 @@ enum Command {
 
 /// Parses the command line, runs the command, and prints an error (with its causes) on stderr.
 pub fn main() -> ExitCode {
-    let result = match Cli::parse().command {
+    let command = Cli::parse().command;
+    // A bad SANDSTEP_SIMD is an error here, before any work, not a silent fallback later.
+    if let Err(e) = crate::mpm::simd::InstructionSet::from_env() {
+        eprintln!("error: {}: {e}", crate::mpm::simd::SIMD_ENV_VAR);
+        return ExitCode::FAILURE;
+    }
+    let result = match command {
         Command::Run(args) => run::run(args),
         Command::Node(args) => run::node(args),
         Command::Experiment(args) => series::experiment(args),

@@ -8,6 +8,7 @@ use anyhow::Context;
 use super::options::{Json, Overrides, Threads};
 use crate::analysis::bag::{analyze_bag_with, AnalysisOptions};
 use crate::analysis::plots::write_plots;
+use crate::mpm::simd::InstructionSet;
 use crate::scene::Scene;
 
 /// `sandstep analyze`.
@@ -50,6 +51,10 @@ pub struct BenchArgs {
     /// Timed substeps.
     #[arg(long, default_value_t = 50)]
     steps: u64,
+    /// Instruction set of the wide loops: auto (the best this CPU has), avx512, avx2 or
+    /// portable. Default: $SANDSTEP_SIMD, else auto.
+    #[arg(long)]
+    simd: Option<String>,
     #[command(flatten)]
     json: Json,
 }
@@ -123,16 +128,21 @@ pub fn calibrate_rft(args: CalibrateRftArgs) -> anyhow::Result<()> {
 pub fn bench(args: BenchArgs) -> anyhow::Result<()> {
     args.threads.apply()?;
     anyhow::ensure!(args.particles >= 8, "--particles must be at least 8");
-    let report = crate::bench::run(args.particles, args.steps)?;
+    let instruction_set = match &args.simd {
+        Some(name) => InstructionSet::by_name(name).context("--simd")?,
+        None => InstructionSet::from_env()?,
+    };
+    let report = crate::bench::run(args.particles, args.steps, instruction_set)?;
     if args.json.json {
         println!("{}", serde_json::to_string(&report)?);
         return Ok(());
     }
     println!(
-        "{} particles, {} threads, {} steps in {:.2} s: {:.3e} particle-steps/s, \
+        "{} particles, {} threads, {}, {} steps in {:.2} s: {:.3e} particle-steps/s, \
          {:.0} bytes/particle",
         report.particles,
         report.threads,
+        instruction_set,
         report.steps,
         report.wall_time_s,
         report.particle_steps_per_s,

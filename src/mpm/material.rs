@@ -17,8 +17,8 @@
 //!   interpolation material point method for simulating elastoplastic materials" (Hencky StVK
 //!   with Drucker-Prager in MPM).
 
-use crate::mpm::simd::{exp, ln, F4x2, Lanes, F4};
-use crate::mpm::svd::{mat, svd_lanes, Frame, Mat, COLD_START};
+use crate::mpm::simd::{array3, exp, ln, mat3, Lanes, Wide};
+use crate::mpm::svd::{svd_lanes, Frame, Mat, COLD_START};
 use nalgebra::{Matrix3, Vector3};
 
 /// Floor on singular values before taking logarithms (dimensionless): a particle compressed
@@ -105,10 +105,10 @@ impl Constitutive {
         volume_correction: &mut f32,
         frame: &mut Frame,
     ) -> Matrix3<f32> {
-        let out = self.update_lanes::<F4>(
-            &mat(|i, j| F4::splat(f[(i, j)])),
-            F4::splat(*volume_correction),
-            frame.map(F4::splat),
+        let out = self.update_lanes(
+            &mat3!(i, j => Wide::<1>::splat(f[(i, j)])),
+            Wide::splat(*volume_correction),
+            frame.map(Wide::splat),
         );
         *f = Matrix3::from_fn(|i, j| out.f[i][j].lane(0));
         *volume_correction = out.volume_correction.lane(0);
@@ -116,33 +116,35 @@ impl Constitutive {
         Matrix3::from_fn(|i, j| out.tau[i][j].lane(0))
     }
 
-    /// The substep's deformation update of eight particles at once: `f` holds F at the start of
+    /// The substep's deformation update of `N` particles at once: `f` holds F at the start of
     /// the substep and `step` = dt grad v (MLS-MPM: dt C_p); the trial `F = (I + step) F` is formed
-    /// and then updated as by [`Self::update`] (equal up to rounding and the number of Jacobi
-    /// sweeps, which the slowest lane sets), in two interleaved groups of four SIMD lanes.
-    pub fn update_x8(
+    /// and then updated as by [`Self::update`]. Each lane is the same bits at any `N`.
+    #[inline(always)]
+    pub fn update_lanes_of<const N: usize>(
         &self,
-        step: &[Matrix3<f32>; 8],
-        f: &mut [Matrix3<f32>; 8],
-        volume_correction: &mut [f32; 8],
-        frames: &mut [Frame; 8],
-    ) -> [Matrix3<f32>; 8] {
-        let lanes = |m: &[Matrix3<f32>; 8]| mat(|i, j| F4x2::from_fn(|l| m[l][(i, j)]));
-        let (step, f_old) = (lanes(step), lanes(f));
-        let one = F4x2::splat(1.0);
+        step: &[Matrix3<f32>; N],
+        f: &mut [Matrix3<f32>; N],
+        volume_correction: &mut [f32; N],
+        frames: &mut [Frame; N],
+    ) -> [Matrix3<f32>; N]
+    where
+        Wide<N>: Lanes,
+    {
+        let step = mat3!(i, j => Wide::<N>::from_fn(|l| step[l][(i, j)]));
+        let f_old = mat3!(i, j => Wide::<N>::from_fn(|l| f[l][(i, j)]));
+        let one = Wide::splat(1.0);
         // (I + step) F, row i of the identity contributing F's row i.
-        let f_trial = mat(|i, j| {
-            (0..3).fold(F4x2::splat(0.0), |acc, k| {
-                let a = if i == k { one + step[i][k] } else { step[i][k] };
-                acc + a * f_old[k][j]
-            })
+        let f_trial = mat3!(i, j => {
+            let a = array3!(k => if i == k { one + step[i][k] } else { step[i][k] });
+            Wide::splat(0.0) + a[0] * f_old[0][j] + a[1] * f_old[1][j] + a[2] * f_old[2][j]
         });
-        let out = self.update_lanes::<F4x2>(
+        let [qx, qy, qz] = array3!(k => Wide::from_fn(|l| frames[l][k]));
+        let out = self.update_lanes(
             &f_trial,
-            F4x2::from_fn(|l| volume_correction[l]),
-            [0, 1, 2, 3].map(|k| F4x2::from_fn(|l| frames[l][k])),
+            Wide::from_fn(|l| volume_correction[l]),
+            [qx, qy, qz, Wide::from_fn(|l| frames[l][3])],
         );
-        for l in 0..8 {
+        for l in 0..N {
             f[l] = Matrix3::from_fn(|i, j| out.f[i][j].lane(l));
             volume_correction[l] = out.volume_correction.lane(l);
             frames[l] = out.frame.map(|q| q.lane(l));
@@ -156,7 +158,10 @@ impl Constitutive {
     /// Fixed corotated: `tau = 2 mu (F - R) F^T + lambda (J - 1) J I` with `R = U V^T`, `J = det F`,
     /// evaluated as `U diag(2 mu (sigma - 1) sigma + lambda (J - 1) J) U^T` (the same tensor).
     pub fn kirchhoff_stress(&self, f: &Matrix3<f32>) -> Matrix3<f32> {
-        let svd = svd_lanes::<F4>(&mat(|i, j| F4::splat(f[(i, j)])), COLD_START.map(F4::splat));
+        let svd = svd_lanes(
+            &mat3!(i, j => Wide::<1>::splat(f[(i, j)])),
+            COLD_START.map(Wide::splat),
+        );
         let principal = match self {
             Self::DruckerPrager(dp) => hencky_stress(dp.lame, hencky_strain(svd.sigma)),
             Self::FixedCorotated(fc) => corotated_stress(fc.lame, svd.sigma),
@@ -183,18 +188,17 @@ impl Constitutive {
                 let eps_trial = hencky_strain(svd.sigma);
                 let (eps, vc) = drucker_prager_return_lanes(eps_trial, volume_correction, dp);
                 // F <- U exp(eps) V^T, kept bit for bit where nothing changed.
-                let stretch = eps.map(exp);
-                let rebuilt = mat(|i, j| {
-                    let uv = |k: usize| svd.u[i][k] * stretch[k] * svd.v[j][k];
-                    uv(0) + uv(1) + uv(2)
+                let stretch = array3!(k => exp(eps[k]));
+                let rebuilt = mat3!(i, j => {
+                    let uv = array3!(k => svd.u[i][k] * stretch[k] * svd.v[j][k]);
+                    uv[0] + uv[1] + uv[2]
                 });
-                let unchanged = (0..3).map(|k| eps[k].eq(eps_trial[k])).fold(
-                    L::splat(MIN_SINGULAR_VALUE)
-                        .lt(svd.sigma[2])
-                        .or(svd.sigma[2].eq(L::splat(MIN_SINGULAR_VALUE))),
-                    L::and,
-                );
-                let f = mat(|i, j| L::select(unchanged, f[i][j], rebuilt[i][j]));
+                let not_floored = L::splat(MIN_SINGULAR_VALUE)
+                    .lt(svd.sigma[2])
+                    .or(svd.sigma[2].eq(L::splat(MIN_SINGULAR_VALUE)));
+                let same = array3!(k => eps[k].eq(eps_trial[k]));
+                let unchanged = not_floored.and(same[0]).and(same[1]).and(same[2]);
+                let f = mat3!(i, j => L::select(unchanged, f[i][j], rebuilt[i][j]));
                 let tau = principal_to_tensor(&svd.u, hencky_stress(dp.lame, eps));
                 (f, tau, vc)
             }
@@ -272,13 +276,13 @@ fn drucker_prager_return_lanes<L: Lanes>(
     let three = L::splat(3.0);
     let eps = if dp.volume_correction {
         let shift = volume_correction / three;
-        eps_trial.map(|e| e + shift)
+        array3!(k => eps_trial[k] + shift)
     } else {
         eps_trial
     };
     let tr = eps[0] + eps[1] + eps[2];
     let mean = tr / three;
-    let eps_hat = eps.map(|e| e - mean);
+    let eps_hat = array3!(k => eps[k] - mean);
     let eps_hat_norm =
         (eps_hat[0] * eps_hat[0] + eps_hat[1] * eps_hat[1] + eps_hat[2] * eps_hat[2]).sqrt();
     let Lame { mu, lambda } = dp.lame;
@@ -287,7 +291,7 @@ fn drucker_prager_return_lanes<L: Lanes>(
     // Division by a zero norm only happens in lanes the selects discard.
     let shear = dgamma / eps_hat_norm;
     let (compressed, yielding) = (tr.lt(zero), zero.lt(dgamma));
-    let projected: [L; 3] = std::array::from_fn(|k| {
+    let projected: [L; 3] = array3!(k => {
         let on_cone = L::select(yielding, eps[k] - eps_hat[k] * shear, eps[k]);
         L::select(compressed, on_cone, zero)
     });
@@ -312,14 +316,14 @@ struct LaneUpdate<L> {
 /// Hencky strain `ln max(|sigma|, MIN_SINGULAR_VALUE)` of singular values.
 #[inline(always)]
 fn hencky_strain<L: Lanes>(sigma: [L; 3]) -> [L; 3] {
-    sigma.map(|s| ln(s.abs().max(L::splat(MIN_SINGULAR_VALUE))))
+    array3!(k => ln(sigma[k].abs().max(L::splat(MIN_SINGULAR_VALUE))))
 }
 
 /// Principal Kirchhoff stresses (Pa) of Hencky StVK: `2 mu eps + lambda tr(eps)`.
 #[inline(always)]
 fn hencky_stress<L: Lanes>(lame: Lame, eps: [L; 3]) -> [L; 3] {
     let volumetric = L::splat(lame.lambda) * (eps[0] + eps[1] + eps[2]);
-    eps.map(|e| L::splat(2.0 * lame.mu) * e + volumetric)
+    array3!(k => L::splat(2.0 * lame.mu) * eps[k] + volumetric)
 }
 
 /// Principal Kirchhoff stresses (Pa) of fixed corotated: `2 mu (sigma - 1) sigma + lambda (J - 1) J`.
@@ -328,20 +332,19 @@ fn corotated_stress<L: Lanes>(lame: Lame, sigma: [L; 3]) -> [L; 3] {
     let j = sigma[0] * sigma[1] * sigma[2];
     let one = L::splat(1.0);
     let volumetric = L::splat(lame.lambda) * (j - one) * j;
-    sigma.map(|s| L::splat(2.0 * lame.mu) * (s - one) * s + volumetric)
+    array3!(k => L::splat(2.0 * lame.mu) * (sigma[k] - one) * sigma[k] + volumetric)
 }
 
 /// `U diag(t) U^T`, computed on one triangle and mirrored (exactly symmetric).
 #[inline(always)]
 fn principal_to_tensor<L: Lanes>(u: &Mat<L>, t: [L; 3]) -> Mat<L> {
-    let entry = |i: usize, j: usize| {
+    let t = mat3!(i, j => {
         u[i][0] * t[0] * u[j][0] + u[i][1] * t[1] * u[j][1] + u[i][2] * t[2] * u[j][2]
-    };
-    let (xy, xz, yz) = (entry(0, 1), entry(0, 2), entry(1, 2));
+    });
     [
-        [entry(0, 0), xy, xz],
-        [xy, entry(1, 1), yz],
-        [xz, yz, entry(2, 2)],
+        [t[0][0], t[0][1], t[0][2]],
+        [t[0][1], t[1][1], t[1][2]],
+        [t[0][2], t[1][2], t[2][2]],
     ]
 }
 
@@ -627,25 +630,34 @@ mod tests {
         2e-6 * (2.0 * mu + 3.0 * lambda)
     }
 
+    /// Sixteen lanes at once: each lane is the same bits as the particle updated alone, and
+    /// agrees with [`Constitutive::update`] of the trial F formed by nalgebra.
     #[test]
-    fn update_x8_matches_update() {
+    fn update_lanes_of_matches_update() {
         let mut rng = SmallRng::seed_from_u64(17);
         for model in [sand(true), sand(false), jello()] {
-            for _ in 0..500 {
-                let f0: [Matrix3<f32>; 8] = std::array::from_fn(|_| {
+            for _ in 0..250 {
+                let f0: [Matrix3<f32>; 16] = std::array::from_fn(|_| {
                     rotation(&mut rng) * (Matrix3::identity() + 0.1 * gaussian(&mut rng))
                 });
-                let vc0: [f32; 8] = std::array::from_fn(|_| rng.random_range(0.0..0.1));
-                let step: [Matrix3<f32>; 8] = std::array::from_fn(|_| 0.01 * gaussian(&mut rng));
-                let (mut f8, mut vc8, mut frames) = (f0, vc0, [COLD_START; 8]);
-                let tau8 = model.update_x8(&step, &mut f8, &mut vc8, &mut frames);
-                for l in 0..8 {
+                let vc0: [f32; 16] = std::array::from_fn(|_| rng.random_range(0.0..0.1));
+                let step: [Matrix3<f32>; 16] = std::array::from_fn(|_| 0.01 * gaussian(&mut rng));
+                let (mut f16, mut vc16, mut frames) = (f0, vc0, [COLD_START; 16]);
+                let tau16 = model.update_lanes_of(&step, &mut f16, &mut vc16, &mut frames);
+                for l in 0..16 {
+                    let (mut f1, mut vc1, mut frame1) = ([f0[l]], [vc0[l]], [COLD_START]);
+                    let [tau1] = model.update_lanes_of(&[step[l]], &mut f1, &mut vc1, &mut frame1);
+                    assert_eq!(
+                        (tau1, f1[0], vc1[0], frame1[0]),
+                        (tau16[l], f16[l], vc16[l], frames[l]),
+                        "lane {l}"
+                    );
                     let (mut f, mut vc) = ((Matrix3::identity() + step[l]) * f0[l], vc0[l]);
                     let tau = model.update(&mut f, &mut vc, &mut COLD_START.clone());
                     let tol = stress_tolerance(&model);
-                    assert!((tau - tau8[l]).norm() < tol, "{tau} vs {}", tau8[l]);
-                    assert!((f - f8[l]).norm() < 1e-5 * f.norm(), "{f} vs {}", f8[l]);
-                    assert!((vc - vc8[l]).abs() < 5e-6, "{vc} vs {}", vc8[l]);
+                    assert!((tau - tau16[l]).norm() < tol, "{tau} vs {}", tau16[l]);
+                    assert!((f - f16[l]).norm() < 1e-5 * f.norm(), "{f} vs {}", f16[l]);
+                    assert!((vc - vc16[l]).abs() < 5e-6, "{vc} vs {}", vc16[l]);
                 }
             }
         }
@@ -707,22 +719,25 @@ mod tests {
                 .map(|(f, vc)| model.update(f, vc, &mut COLD_START.clone())[(0, 1)])
                 .sum()
         });
-        time("Constitutive::update_x8 (sand, cold)", &|fs, vcs| {
-            let groups = fs.chunks_exact_mut(8).zip(vcs.chunks_exact_mut(8));
-            groups
-                .map(|(f, vc)| {
-                    let mut frames = [COLD_START; 8];
-                    let f = f.try_into().unwrap();
-                    let tau = model.update_x8(
-                        &[Matrix3::zeros(); 8],
-                        f,
-                        vc.try_into().unwrap(),
-                        &mut frames,
-                    );
-                    tau[0][(0, 1)]
-                })
-                .sum()
-        });
+        time(
+            "Constitutive::update_lanes_of::<8> (sand, cold)",
+            &|fs, vcs| {
+                let groups = fs.chunks_exact_mut(8).zip(vcs.chunks_exact_mut(8));
+                groups
+                    .map(|(f, vc)| {
+                        let mut frames = [COLD_START; 8];
+                        let f = f.try_into().unwrap();
+                        let tau = model.update_lanes_of(
+                            &[Matrix3::zeros(); 8],
+                            f,
+                            vc.try_into().unwrap(),
+                            &mut frames,
+                        );
+                        tau[0][(0, 1)]
+                    })
+                    .sum()
+            },
+        );
         // Warm: frames from a decomposition of the same F a substep earlier (I + 1e-3 noise).
         let frames: Vec<Frame> = f0
             .iter()
@@ -733,18 +748,25 @@ mod tests {
                 frame
             })
             .collect();
-        time("Constitutive::update_x8 (sand, warm)", &|fs, vcs| {
-            let groups = fs.chunks_exact_mut(8).zip(vcs.chunks_exact_mut(8));
-            groups
-                .zip(frames.chunks_exact(8))
-                .map(|((f, vc), fr)| {
-                    let mut fr: [Frame; 8] = fr.try_into().unwrap();
-                    let f = f.try_into().unwrap();
-                    let tau =
-                        model.update_x8(&[Matrix3::zeros(); 8], f, vc.try_into().unwrap(), &mut fr);
-                    tau[0][(0, 1)]
-                })
-                .sum()
-        });
+        time(
+            "Constitutive::update_lanes_of::<8> (sand, warm)",
+            &|fs, vcs| {
+                let groups = fs.chunks_exact_mut(8).zip(vcs.chunks_exact_mut(8));
+                groups
+                    .zip(frames.chunks_exact(8))
+                    .map(|((f, vc), fr)| {
+                        let mut fr: [Frame; 8] = fr.try_into().unwrap();
+                        let f = f.try_into().unwrap();
+                        let tau = model.update_lanes_of(
+                            &[Matrix3::zeros(); 8],
+                            f,
+                            vc.try_into().unwrap(),
+                            &mut fr,
+                        );
+                        tau[0][(0, 1)]
+                    })
+                    .sum()
+            },
+        );
     }
 }

@@ -1,291 +1,144 @@
-//! Four f32 lanes with the few operations the hot loops need: SSE on x86_64 (part of its
-//! baseline, so always available), plain arrays elsewhere. Used for four particles at once (the
-//! SVD) and for the four components of a grid node (`[p_x, p_y, p_z, m]`) in P2G and G2P.
+//! SIMD lanes written once, compiled per instruction set: [`Wide<N>`] holds `N` f32 lanes and
+//! does every operation lane by lane in plain Rust, which the compiler turns into SSE, AVX2 or
+//! AVX-512 instructions depending on the target features of the function it is inlined into.
+//! [`InstructionSet::dispatch`] runs code under the best features this CPU has (chosen at run
+//! time with the `pulp` crate), with as many lanes as that instruction set holds well.
+//!
+//! Every operation is exact IEEE arithmetic lane by lane (no fused multiply-add, no estimated
+//! reciprocals), so a lane's result does not depend on the width or the instruction set: every
+//! path gives the same bits (`docs/determinism.md`; pinned in `tests/determinism.rs`).
+//!
+//! Used for many particles at once (the SVD and the constitutive update). The four components
+//! of a grid node in P2G and G2P are [`F4`] (`node.rs`).
+
+mod instruction_set;
+mod node;
 
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
-/// Four f32 lanes. Comparisons return lane masks (all bits set or clear) stored as `F4`.
-#[cfg(target_arch = "x86_64")]
-#[derive(Clone, Copy)]
-pub struct F4(std::arch::x86_64::__m128);
+pub use instruction_set::{InstructionSet, SimdError, WithLanes, SIMD_ENV_VAR};
+pub use node::F4;
 
-// SAFETY (every `unsafe` block in this impl): SSE and SSE2 belong to the x86_64 baseline, so the
-// intrinsics are always available; none of them dereferences a pointer.
-#[cfg(target_arch = "x86_64")]
-impl F4 {
-    #[inline(always)]
-    pub fn splat(x: f32) -> Self {
-        Self(unsafe { std::arch::x86_64::_mm_set1_ps(x) })
-    }
-    #[inline(always)]
-    pub fn from_array(a: [f32; 4]) -> Self {
-        Self(unsafe { std::arch::x86_64::_mm_setr_ps(a[0], a[1], a[2], a[3]) })
-    }
-    #[inline(always)]
-    pub fn to_array(self) -> [f32; 4] {
-        unsafe { std::mem::transmute::<std::arch::x86_64::__m128, [f32; 4]>(self.0) }
-    }
-    #[inline(always)]
-    pub fn select(mask: Self, a: Self, b: Self) -> Self {
-        use std::arch::x86_64::*;
-        Self(unsafe { _mm_or_ps(_mm_and_ps(mask.0, a.0), _mm_andnot_ps(mask.0, b.0)) })
-    }
-    #[inline(always)]
-    pub fn lt(self, o: Self) -> Self {
-        Self(unsafe { std::arch::x86_64::_mm_cmplt_ps(self.0, o.0) })
-    }
-    #[inline(always)]
-    pub fn eq(self, o: Self) -> Self {
-        Self(unsafe { std::arch::x86_64::_mm_cmpeq_ps(self.0, o.0) })
-    }
-    #[inline(always)]
-    pub fn abs(self) -> Self {
-        Self(unsafe { std::arch::x86_64::_mm_andnot_ps(Self::splat(-0.0).0, self.0) })
-    }
-    /// +1 or -1 with the sign bit of `self`.
-    #[inline(always)]
-    pub fn sign_one(self) -> Self {
-        use std::arch::x86_64::*;
-        let sign = unsafe { _mm_and_ps(Self::splat(-0.0).0, self.0) };
-        Self(unsafe { _mm_or_ps(sign, Self::splat(1.0).0) })
-    }
-    #[inline(always)]
-    pub fn min(self, o: Self) -> Self {
-        Self(unsafe { std::arch::x86_64::_mm_min_ps(self.0, o.0) })
-    }
-    #[inline(always)]
-    pub fn max(self, o: Self) -> Self {
-        Self(unsafe { std::arch::x86_64::_mm_max_ps(self.0, o.0) })
-    }
-    #[inline(always)]
-    pub fn sqrt(self) -> Self {
-        Self(unsafe { std::arch::x86_64::_mm_sqrt_ps(self.0) })
-    }
-    /// `1 / sqrt(x)`, correctly rounded twice (square root, then division), so every x86-64
-    /// CPU gives the same bits. `_mm_rsqrt_ps` would be faster, but its 12-bit approximation
-    /// differs between CPU vendors (and emulators), which made runs differ between machines.
-    #[inline(always)]
-    pub fn rsqrt(self) -> Self {
-        use std::arch::x86_64::*;
-        Self(unsafe { _mm_div_ps(_mm_set1_ps(1.0), _mm_sqrt_ps(self.0)) })
-    }
-    /// Lane-wise AND of two masks.
-    #[inline(always)]
-    pub fn and(self, o: Self) -> Self {
-        Self(unsafe { std::arch::x86_64::_mm_and_ps(self.0, o.0) })
-    }
-    /// Lane-wise OR of two masks.
-    #[inline(always)]
-    pub fn or(self, o: Self) -> Self {
-        Self(unsafe { std::arch::x86_64::_mm_or_ps(self.0, o.0) })
-    }
-    /// `floor(x)` for |x| < 2^31 (SSE2 has no rounding instruction: truncate, then step down
-    /// where truncation rounded up).
-    #[inline(always)]
-    pub fn floor(self) -> Self {
-        use std::arch::x86_64::*;
-        unsafe {
-            let t = _mm_cvtepi32_ps(_mm_cvttps_epi32(self.0));
-            let above = _mm_and_ps(_mm_cmpgt_ps(t, self.0), _mm_set1_ps(1.0));
-            Self(_mm_sub_ps(t, above))
-        }
-    }
-    /// `(m, e)` with `x = m 2^e`, `m` in [0.5, 1), `e` an integer as f32; for positive normal x.
-    #[inline(always)]
-    pub fn frexp(self) -> (Self, Self) {
-        use std::arch::x86_64::*;
-        unsafe {
-            let bits = _mm_castps_si128(self.0);
-            let e = _mm_sub_epi32(_mm_srli_epi32::<23>(bits), _mm_set1_epi32(126));
-            let m = _mm_or_si128(
-                _mm_and_si128(bits, _mm_set1_epi32(0x807f_ffff_u32 as i32)),
-                _mm_set1_epi32(0x3f00_0000),
-            );
-            (Self(_mm_castsi128_ps(m)), Self(_mm_cvtepi32_ps(e)))
-        }
-    }
-    /// `2^n` for integer-valued `n` in [-126, 127].
-    #[inline(always)]
-    pub fn pow2(n: Self) -> Self {
-        use std::arch::x86_64::*;
-        unsafe {
-            let e = _mm_add_epi32(_mm_cvttps_epi32(n.0), _mm_set1_epi32(127));
-            Self(_mm_castsi128_ps(_mm_slli_epi32::<23>(e)))
-        }
-    }
-    /// Whether any lane of a comparison mask is set.
-    #[inline(always)]
-    pub fn any(self) -> bool {
-        unsafe { std::arch::x86_64::_mm_movemask_ps(self.0) != 0 }
-    }
-    /// (2^(127-e), 2^(e-127)) with e the biased exponent of `self`, clamped to [1, 253].
-    #[inline(always)]
-    pub fn pow2_normalizers(self) -> (Self, Self) {
-        use std::arch::x86_64::*;
-        unsafe {
-            let e = _mm_srli_epi32::<23>(_mm_castps_si128(self.0));
-            // e is in [0, 255]: 16-bit min/max are exact on these 32-bit lanes.
-            let e = _mm_min_epi16(_mm_max_epi16(e, _mm_set1_epi32(1)), _mm_set1_epi32(253));
-            let scale = _mm_slli_epi32::<23>(_mm_sub_epi32(_mm_set1_epi32(254), e));
-            let unscale = _mm_slli_epi32::<23>(e);
-            (
-                Self(_mm_castsi128_ps(scale)),
-                Self(_mm_castsi128_ps(unscale)),
-            )
-        }
-    }
-}
-
-#[cfg(target_arch = "x86_64")]
-macro_rules! f4_binop {
-    ($tr:ident, $f:ident, $intr:ident) => {
-        impl $tr for F4 {
-            type Output = F4;
-            #[inline(always)]
-            fn $f(self, o: F4) -> F4 {
-                // SAFETY: SSE is part of the x86_64 baseline.
-                F4(unsafe { std::arch::x86_64::$intr(self.0, o.0) })
-            }
-        }
+/// `[e(0), e(1), e(2)]` for `array3!(k => e(k))`, written out in place. Lane code builds its
+/// small arrays with this instead of closures: a closure is a function of its own, and where the
+/// compiler does not inline it (wide lanes make it large) it runs without the target features
+/// of the code around it.
+macro_rules! array3 {
+    ($k:ident => $e:expr) => {
+        [
+            {
+                let $k = 0usize;
+                $e
+            },
+            {
+                let $k = 1usize;
+                $e
+            },
+            {
+                let $k = 2usize;
+                $e
+            },
+        ]
     };
 }
-#[cfg(target_arch = "x86_64")]
-f4_binop!(Add, add, _mm_add_ps);
-#[cfg(target_arch = "x86_64")]
-f4_binop!(Sub, sub, _mm_sub_ps);
-#[cfg(target_arch = "x86_64")]
-f4_binop!(Mul, mul, _mm_mul_ps);
-#[cfg(target_arch = "x86_64")]
-f4_binop!(Div, div, _mm_div_ps);
+pub(crate) use array3;
 
-/// Portable fallback of the same lanes.
-#[cfg(not(target_arch = "x86_64"))]
-#[derive(Clone, Copy)]
-pub struct F4([f32; 4]);
+/// A 3x3 matrix `[[e(0, 0), e(0, 1), ..], ..]` for `mat3!(i, j => e(i, j))`, as [`array3`].
+macro_rules! mat3 {
+    ($i:ident, $j:ident => $e:expr) => {
+        $crate::mpm::simd::array3!($i => $crate::mpm::simd::array3!($j => $e))
+    };
+}
+pub(crate) use mat3;
 
-#[cfg(not(target_arch = "x86_64"))]
-impl F4 {
+/// 1.5 2^23: `(x + this) - this` is `x` rounded to an integer, exactly, for |x| < 2^22.
+const ROUNDING_SHIFT: f32 = 12_582_912.0;
+/// 2^23 + 127: `n + this` holds the biased exponent `n + 127` in its low mantissa bits.
+const EXPONENT_SHIFT: f32 = 8_388_735.0;
+
+/// `N` f32 lanes. Comparisons return lane masks (all bits set or clear) stored as lanes.
+#[derive(Clone, Copy, Debug)]
+pub struct Wide<const N: usize>(pub [f32; N]);
+
+// Lane loops index all arrays alike: the form the compiler vectorises.
+#[allow(clippy::needless_range_loop)]
+impl<const N: usize> Wide<N> {
     #[inline(always)]
     fn map(self, f: impl Fn(f32) -> f32) -> Self {
-        Self(self.0.map(f))
+        let mut out = self.0;
+        for k in 0..N {
+            out[k] = f(self.0[k]);
+        }
+        Self(out)
     }
     #[inline(always)]
     fn zip(self, o: Self, f: impl Fn(f32, f32) -> f32) -> Self {
-        Self([0, 1, 2, 3].map(|i| f(self.0[i], o.0[i])))
+        let mut out = self.0;
+        for k in 0..N {
+            out[k] = f(self.0[k], o.0[k]);
+        }
+        Self(out)
+    }
+    #[inline(always)]
+    fn map_bits(self, f: impl Fn(u32) -> u32) -> Self {
+        self.map(|x| f32::from_bits(f(x.to_bits())))
+    }
+    #[inline(always)]
+    fn zip_bits(self, o: Self, f: impl Fn(u32, u32) -> u32) -> Self {
+        self.zip(o, |x, y| f32::from_bits(f(x.to_bits(), y.to_bits())))
     }
     #[inline(always)]
     fn mask(c: bool) -> f32 {
         f32::from_bits(if c { !0 } else { 0 })
     }
+    #[inline(always)]
     pub fn splat(x: f32) -> Self {
-        Self([x; 4])
-    }
-    pub fn from_array(a: [f32; 4]) -> Self {
-        Self(a)
-    }
-    pub fn to_array(self) -> [f32; 4] {
-        self.0
+        Self([x; N])
     }
     #[inline(always)]
-    pub fn select(mask: Self, a: Self, b: Self) -> Self {
-        Self([0, 1, 2, 3].map(|i| {
-            let m = mask.0[i].to_bits();
-            f32::from_bits((a.0[i].to_bits() & m) | (b.0[i].to_bits() & !m))
-        }))
+    pub fn from_array(a: [f32; N]) -> Self {
+        Self(a)
     }
-    pub fn lt(self, o: Self) -> Self {
-        self.zip(o, |x, y| Self::mask(x < y))
-    }
-    pub fn eq(self, o: Self) -> Self {
-        self.zip(o, |x, y| Self::mask(x == y))
-    }
-    pub fn abs(self) -> Self {
-        self.map(f32::abs)
-    }
-    pub fn sign_one(self) -> Self {
-        self.map(|x| 1f32.copysign(x))
-    }
-    pub fn min(self, o: Self) -> Self {
-        self.zip(o, |x, y| if x < y { x } else { y })
-    }
-    pub fn max(self, o: Self) -> Self {
-        self.zip(o, |x, y| if x > y { x } else { y })
-    }
-    pub fn sqrt(self) -> Self {
-        self.map(f32::sqrt)
-    }
-    pub fn rsqrt(self) -> Self {
-        self.map(|x| 1.0 / x.sqrt())
-    }
-    pub fn and(self, o: Self) -> Self {
-        Self([0, 1, 2, 3].map(|i| f32::from_bits(self.0[i].to_bits() & o.0[i].to_bits())))
-    }
-    pub fn or(self, o: Self) -> Self {
-        Self([0, 1, 2, 3].map(|i| f32::from_bits(self.0[i].to_bits() | o.0[i].to_bits())))
-    }
-    pub fn floor(self) -> Self {
-        self.map(f32::floor)
-    }
-    pub fn frexp(self) -> (Self, Self) {
-        let bits = self.0.map(f32::to_bits);
-        (
-            Self(bits.map(|b| f32::from_bits((b & 0x807f_ffff) | 0x3f00_0000))),
-            Self(bits.map(|b| ((b >> 23) & 0xff) as f32 - 126.0)),
-        )
-    }
-    pub fn pow2(n: Self) -> Self {
-        n.map(|n| f32::from_bits(((n as i32 + 127) as u32) << 23))
-    }
-    pub fn any(self) -> bool {
-        self.0.iter().any(|x| x.to_bits() != 0)
-    }
-    pub fn pow2_normalizers(self) -> (Self, Self) {
-        let e = self.0.map(|x| ((x.to_bits() >> 23) & 0xff).clamp(1, 253));
-        (
-            Self(e.map(|e| f32::from_bits((254 - e) << 23))),
-            Self(e.map(|e| f32::from_bits(e << 23))),
-        )
+    #[inline(always)]
+    pub fn to_array(self) -> [f32; N] {
+        self.0
     }
 }
 
-#[cfg(not(target_arch = "x86_64"))]
-macro_rules! f4_binop {
+macro_rules! wide_binop {
     ($tr:ident, $f:ident, $op:tt) => {
-        impl $tr for F4 {
-            type Output = F4;
+        impl<const N: usize> $tr for Wide<N> {
+            type Output = Self;
             #[inline(always)]
-            fn $f(self, o: F4) -> F4 {
+            fn $f(self, o: Self) -> Self {
                 self.zip(o, |x, y| x $op y)
             }
         }
     };
 }
-#[cfg(not(target_arch = "x86_64"))]
-f4_binop!(Add, add, +);
-#[cfg(not(target_arch = "x86_64"))]
-f4_binop!(Sub, sub, -);
-#[cfg(not(target_arch = "x86_64"))]
-f4_binop!(Mul, mul, *);
-#[cfg(not(target_arch = "x86_64"))]
-f4_binop!(Div, div, /);
+wide_binop!(Add, add, +);
+wide_binop!(Sub, sub, -);
+wide_binop!(Mul, mul, *);
+wide_binop!(Div, div, /);
 
-impl Neg for F4 {
-    type Output = F4;
+impl<const N: usize> Neg for Wide<N> {
+    type Output = Self;
+    /// `0 - x` (as SSE code has it: `-0.0` becomes `+0.0`).
     #[inline(always)]
-    fn neg(self) -> F4 {
-        F4::splat(0.0) - self
+    fn neg(self) -> Self {
+        Self::splat(0.0) - self
     }
 }
 
-impl Mul<F4> for f32 {
-    type Output = F4;
+impl<const N: usize> Mul<Wide<N>> for f32 {
+    type Output = Wide<N>;
     #[inline(always)]
-    fn mul(self, o: F4) -> F4 {
-        F4::splat(self) * o
+    fn mul(self, o: Wide<N>) -> Wide<N> {
+        Wide::splat(self) * o
     }
 }
 
-/// Lane-wise arithmetic shared by [`F4`] and [`F4x2`], so the SVD is written once for both.
+/// Lane-wise arithmetic, so the SVD and the constitutive update are written once for every width.
 pub trait Lanes:
     Copy
     + Add<Output = Self>
@@ -304,214 +157,131 @@ pub trait Lanes:
     fn lt(self, o: Self) -> Self;
     fn eq(self, o: Self) -> Self;
     fn abs(self) -> Self;
+    /// +1 or -1 with the sign bit of `self`.
     fn sign_one(self) -> Self;
+    /// `if self < o { self } else { o }` (SSE's `minps`).
     fn min(self, o: Self) -> Self;
+    /// `if self > o { self } else { o }` (SSE's `maxps`).
     fn max(self, o: Self) -> Self;
     fn sqrt(self) -> Self;
+    /// `1 / sqrt(x)`, correctly rounded twice (square root, then division), so every CPU gives
+    /// the same bits. `rsqrtps` would be faster, but its 12-bit estimate differs between CPU
+    /// vendors (and emulators), which made runs differ between machines.
     fn rsqrt(self) -> Self;
+    /// (2^(127-e), 2^(e-127)) with e the biased exponent of `self`, clamped to [1, 253].
     fn pow2_normalizers(self) -> (Self, Self);
     /// Whether any lane of a comparison mask is set.
     fn any(self) -> bool;
+    /// Lane-wise AND of two masks.
     fn and(self, o: Self) -> Self;
+    /// Lane-wise OR of two masks.
     fn or(self, o: Self) -> Self;
+    /// `floor(x)` for |x| < 2^22: rounded to the nearest integer by adding and subtracting
+    /// 1.5 2^23 (exact), then stepped down where that rounded up.
     fn floor(self) -> Self;
+    /// `(m, e)` with `x = m 2^e`, `m` in [0.5, 1), `e` an integer as f32; for positive normal x.
     fn frexp(self) -> (Self, Self);
+    /// `2^n` for integer-valued `n` in [-126, 127].
     fn pow2(n: Self) -> Self;
 }
 
-impl Lanes for F4 {
-    const N: usize = 4;
+#[allow(clippy::needless_range_loop)]
+impl<const N: usize> Lanes for Wide<N> {
+    const N: usize = N;
     #[inline(always)]
     fn splat(x: f32) -> Self {
-        F4::splat(x)
-    }
-    #[inline(always)]
-    fn from_fn(f: impl FnMut(usize) -> f32) -> Self {
-        F4::from_array(std::array::from_fn(f))
-    }
-    #[inline(always)]
-    fn lane(self, k: usize) -> f32 {
-        self.to_array()[k]
-    }
-    #[inline(always)]
-    fn select(mask: Self, a: Self, b: Self) -> Self {
-        F4::select(mask, a, b)
-    }
-    #[inline(always)]
-    fn lt(self, o: Self) -> Self {
-        F4::lt(self, o)
-    }
-    #[inline(always)]
-    fn eq(self, o: Self) -> Self {
-        F4::eq(self, o)
-    }
-    #[inline(always)]
-    fn abs(self) -> Self {
-        F4::abs(self)
-    }
-    #[inline(always)]
-    fn sign_one(self) -> Self {
-        F4::sign_one(self)
-    }
-    #[inline(always)]
-    fn min(self, o: Self) -> Self {
-        F4::min(self, o)
-    }
-    #[inline(always)]
-    fn max(self, o: Self) -> Self {
-        F4::max(self, o)
-    }
-    #[inline(always)]
-    fn sqrt(self) -> Self {
-        F4::sqrt(self)
-    }
-    #[inline(always)]
-    fn rsqrt(self) -> Self {
-        F4::rsqrt(self)
-    }
-    #[inline(always)]
-    fn pow2_normalizers(self) -> (Self, Self) {
-        F4::pow2_normalizers(self)
-    }
-    #[inline(always)]
-    fn any(self) -> bool {
-        F4::any(self)
-    }
-    #[inline(always)]
-    fn and(self, o: Self) -> Self {
-        F4::and(self, o)
-    }
-    #[inline(always)]
-    fn or(self, o: Self) -> Self {
-        F4::or(self, o)
-    }
-    #[inline(always)]
-    fn floor(self) -> Self {
-        F4::floor(self)
-    }
-    #[inline(always)]
-    fn frexp(self) -> (Self, Self) {
-        F4::frexp(self)
-    }
-    #[inline(always)]
-    fn pow2(n: Self) -> Self {
-        F4::pow2(n)
-    }
-}
-
-/// Eight lanes as two independent [`F4`]: each operation is issued twice with no dependency
-/// between the halves, which hides the latency of long dependent chains (the Jacobi sweeps).
-#[derive(Clone, Copy)]
-pub struct F4x2(pub F4, pub F4);
-
-macro_rules! f4x2_binop {
-    ($tr:ident, $f:ident) => {
-        impl $tr for F4x2 {
-            type Output = F4x2;
-            #[inline(always)]
-            fn $f(self, o: F4x2) -> F4x2 {
-                F4x2(self.0.$f(o.0), self.1.$f(o.1))
-            }
-        }
-    };
-}
-f4x2_binop!(Add, add);
-f4x2_binop!(Sub, sub);
-f4x2_binop!(Mul, mul);
-f4x2_binop!(Div, div);
-
-impl Neg for F4x2 {
-    type Output = F4x2;
-    #[inline(always)]
-    fn neg(self) -> F4x2 {
-        F4x2(-self.0, -self.1)
-    }
-}
-
-impl Lanes for F4x2 {
-    const N: usize = 8;
-    #[inline(always)]
-    fn splat(x: f32) -> Self {
-        F4x2(F4::splat(x), F4::splat(x))
+        Wide::splat(x)
     }
     #[inline(always)]
     fn from_fn(mut f: impl FnMut(usize) -> f32) -> Self {
-        let lo = <F4 as Lanes>::from_fn(&mut f);
-        F4x2(lo, <F4 as Lanes>::from_fn(|k| f(k + 4)))
+        let mut out = [0.0; N];
+        for (k, x) in out.iter_mut().enumerate() {
+            *x = f(k);
+        }
+        Self(out)
     }
     #[inline(always)]
     fn lane(self, k: usize) -> f32 {
-        if k < 4 {
-            self.0.to_array()[k]
-        } else {
-            self.1.to_array()[k - 4]
-        }
+        self.0[k]
     }
     #[inline(always)]
     fn select(mask: Self, a: Self, b: Self) -> Self {
-        F4x2(F4::select(mask.0, a.0, b.0), F4::select(mask.1, a.1, b.1))
+        let mut out = b.0;
+        for k in 0..N {
+            let m = mask.0[k].to_bits();
+            out[k] = f32::from_bits((a.0[k].to_bits() & m) | (b.0[k].to_bits() & !m));
+        }
+        Self(out)
     }
     #[inline(always)]
     fn lt(self, o: Self) -> Self {
-        F4x2(self.0.lt(o.0), self.1.lt(o.1))
+        self.zip(o, |x, y| Self::mask(x < y))
     }
     #[inline(always)]
     fn eq(self, o: Self) -> Self {
-        F4x2(self.0.eq(o.0), self.1.eq(o.1))
+        self.zip(o, |x, y| Self::mask(x == y))
     }
     #[inline(always)]
     fn abs(self) -> Self {
-        F4x2(self.0.abs(), self.1.abs())
+        self.map_bits(|b| b & 0x7fff_ffff)
     }
     #[inline(always)]
     fn sign_one(self) -> Self {
-        F4x2(self.0.sign_one(), self.1.sign_one())
+        self.map_bits(|b| (b & 0x8000_0000) | 1f32.to_bits())
     }
     #[inline(always)]
     fn min(self, o: Self) -> Self {
-        F4x2(self.0.min(o.0), self.1.min(o.1))
+        self.zip(o, |x, y| if x < y { x } else { y })
     }
     #[inline(always)]
     fn max(self, o: Self) -> Self {
-        F4x2(self.0.max(o.0), self.1.max(o.1))
+        self.zip(o, |x, y| if x > y { x } else { y })
     }
     #[inline(always)]
     fn sqrt(self) -> Self {
-        F4x2(self.0.sqrt(), self.1.sqrt())
+        self.map(f32::sqrt)
     }
     #[inline(always)]
     fn rsqrt(self) -> Self {
-        F4x2(self.0.rsqrt(), self.1.rsqrt())
+        self.map(|x| 1.0 / x.sqrt())
     }
     #[inline(always)]
     fn pow2_normalizers(self) -> (Self, Self) {
-        let ((s0, u0), (s1, u1)) = (self.0.pow2_normalizers(), self.1.pow2_normalizers());
-        (F4x2(s0, s1), F4x2(u0, u1))
+        let exponent = |b: u32| ((b >> 23) & 0xff).clamp(1, 253);
+        (
+            self.map_bits(|b| (254 - exponent(b)) << 23),
+            self.map_bits(|b| exponent(b) << 23),
+        )
     }
     #[inline(always)]
     fn any(self) -> bool {
-        self.0.any() || self.1.any()
+        self.0.iter().fold(0, |acc, x| acc | x.to_bits()) != 0
     }
     #[inline(always)]
     fn and(self, o: Self) -> Self {
-        F4x2(self.0.and(o.0), self.1.and(o.1))
+        self.zip_bits(o, |x, y| x & y)
     }
     #[inline(always)]
     fn or(self, o: Self) -> Self {
-        F4x2(self.0.or(o.0), self.1.or(o.1))
+        self.zip_bits(o, |x, y| x | y)
     }
     #[inline(always)]
     fn floor(self) -> Self {
-        F4x2(self.0.floor(), self.1.floor())
+        let rounded = (self + Self::splat(ROUNDING_SHIFT)) - Self::splat(ROUNDING_SHIFT);
+        let above = rounded.zip(self, |r, x| if r > x { 1.0 } else { 0.0 });
+        rounded - above
     }
     #[inline(always)]
     fn frexp(self) -> (Self, Self) {
-        let ((m0, e0), (m1, e1)) = (self.0.frexp(), self.1.frexp());
-        (F4x2(m0, m1), F4x2(e0, e1))
+        (
+            self.map_bits(|b| (b & 0x807f_ffff) | 0x3f00_0000),
+            self.map(|x| ((x.to_bits() >> 23) & 0xff) as i32 as f32 - 126.0),
+        )
     }
     #[inline(always)]
     fn pow2(n: Self) -> Self {
-        F4x2(F4::pow2(n.0), F4::pow2(n.1))
+        // n + 127 + 2^23 holds the biased exponent n + 127 in its low mantissa bits (exact).
+        (n + Self::splat(EXPONENT_SHIFT)).map_bits(|b| b << 23)
     }
 }
 
@@ -577,6 +347,31 @@ pub fn exp<L: Lanes>(x: L) -> L {
 mod tests {
     use super::*;
 
+    /// The bit tricks of `floor`, `pow2`, `frexp` and `pow2_normalizers` are exact.
+    #[test]
+    fn exact_lane_tricks() {
+        let mut x = -4_194_303.0f32;
+        while x < 4_194_303.0 {
+            for x in [x, -x, x * 1e-6, x * 1e-6 + 0.5, (x * 1e-6).round()] {
+                let got = Wide::<8>::splat(x).floor().lane(3);
+                assert_eq!(got, x.floor(), "floor {x}");
+            }
+            x += 1234.567;
+        }
+        for n in -126..=127 {
+            let got = Wide::<4>::pow2(Wide::splat(n as f32)).lane(0);
+            assert_eq!(got, 2f32.powi(n), "2^{n}");
+        }
+        for x in [1e-30f32, 0.3, 1.0, 1.5, 7.0, 3e30] {
+            let (m, e) = Wide::<4>::splat(x).frexp();
+            assert!((0.5..1.0).contains(&m.lane(1)), "{x}");
+            assert_eq!(m.lane(1) * 2f32.powi(e.lane(1) as i32), x);
+            let (scale, unscale) = Wide::<4>::splat(x).pow2_normalizers();
+            assert!((1.0..2.0).contains(&(x * scale.lane(2))), "{x}");
+            assert_eq!(scale.lane(2) * unscale.lane(2), 1.0);
+        }
+    }
+
     /// ln and exp against f64 over the ranges the constitutive update uses.
     #[test]
     fn ln_and_exp_are_accurate() {
@@ -584,7 +379,7 @@ mod tests {
         let mut x = 1e-6f32;
         while x < 1e6 {
             let xs = [x, x * 1.000_1, x * 1.3, x * 1.7];
-            let got = ln(F4::from_array(xs)).to_array();
+            let got = ln(Wide::from_array(xs)).to_array();
             for (g, x) in got.iter().zip(xs) {
                 let exact = (x as f64).ln();
                 worst_ln = worst_ln.max((*g as f64 - exact).abs() / exact.abs().max(1.0));
@@ -596,7 +391,7 @@ mod tests {
         let mut x = -80.0f32;
         while x < 80.0 {
             let xs = [x, x + 1e-4, x + 0.3, -x * 1e-3];
-            let got = exp(F4x2(F4::from_array(xs), F4::splat(0.0)));
+            let got = exp(Wide::<8>::from_fn(|k| if k < 4 { xs[k] } else { 0.0 }));
             for (k, x) in xs.iter().enumerate() {
                 let exact = (*x as f64).exp();
                 worst_exp = worst_exp.max((got.lane(k) as f64 - exact).abs() / exact);
@@ -607,7 +402,7 @@ mod tests {
         // Near 1 the logarithm is small: its absolute error must be too (Hencky strains).
         for k in 1..1000 {
             let x = 1.0 + (k as f32 - 500.0) * 1e-6;
-            let g = ln(F4::splat(x)).to_array()[0] as f64;
+            let g = ln(Wide::<1>::splat(x)).to_array()[0] as f64;
             assert!((g - (x as f64).ln()).abs() < 1.2e-7 * (x as f64).ln().abs() + 1e-12);
         }
     }

@@ -25,9 +25,10 @@
 //! warm, one or two sweeps suffice instead of the six a cold start needs.
 //!
 //! No heap and no data-dependent branches apart from that stopping test: every choice is a
-//! lane-wise select. The arithmetic is written once over [`Lanes`]: [`svd3`] broadcasts one
-//! matrix to 4 SSE lanes, [`svd3_x8`] decomposes eight independent matrices in two interleaved
-//! groups of four, which hides the latency of the dependent Jacobi chain.
+//! lane-wise select. The arithmetic is written once over [`Lanes`]: [`svd3`] decomposes one
+//! matrix, [`svd3_lanes`] `N` independent ones at once (the constitutive update runs as many
+//! as its instruction set holds, `simd::InstructionSet`). A lane stops sweeping when it has
+//! converged, whatever the other lanes do, so each lane's result is the same bits at any width.
 //!
 //! Accuracy (f32): reconstruction error below 2e-6 `|a|` on random matrices, `u` and `v`
 //! orthonormal to about 1e-6. Forming `a^T a` squares the condition number, so for matrices with
@@ -37,7 +38,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use super::simd::{F4x2, Lanes, F4};
+use super::simd::{array3, mat3, Lanes, Wide};
 
 /// `a = u * diag(sigma) * v^T`; see the module documentation for the conventions.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -65,20 +66,19 @@ pub fn svd3(a: &Matrix3<f32>) -> Svd3 {
 /// [`svd3`] warm-started from `frame`, which is replaced by the new Jacobi frame.
 #[inline]
 pub fn svd3_warm(a: &Matrix3<f32>, frame: &mut Frame) -> Svd3 {
-    let out = svd_lanes::<F4>(&mat(|i, j| F4::splat(a[(i, j)])), frame.map(F4::splat));
-    *frame = out.frame(0);
-    out.svd(0)
+    let [out] = svd3_lanes::<1>(&[*a], std::slice::from_mut(frame).try_into().unwrap());
+    out
 }
 
-/// Eight independent warm-started decompositions at once (each as [`svd3_warm`] up to rounding
-/// and the number of sweeps, which the slowest lane sets); about the cost of two [`svd3`] calls.
-#[inline]
-pub fn svd3_x8(a: &[Matrix3<f32>; 8], frames: &mut [Frame; 8]) -> [Svd3; 8] {
-    let lanes = mat(|i, j| F4x2::from_fn(|l| a[l][(i, j)]));
-    let out = svd_lanes::<F4x2>(
-        &lanes,
-        [0, 1, 2, 3].map(|k| F4x2::from_fn(|l| frames[l][k])),
-    );
+/// `N` independent warm-started decompositions at once, each the same bits as [`svd3_warm`].
+#[inline(always)]
+pub fn svd3_lanes<const N: usize>(a: &[Matrix3<f32>; N], frames: &mut [Frame; N]) -> [Svd3; N]
+where
+    Wide<N>: Lanes,
+{
+    let lanes = mat3!(i, j => Wide::<N>::from_fn(|l| a[l][(i, j)]));
+    let frame = [0, 1, 2, 3].map(|k| Wide::from_fn(|l| frames[l][k]));
+    let out = svd_lanes(&lanes, frame);
     *frames = std::array::from_fn(|l| out.frame(l));
     std::array::from_fn(|l| out.svd(l))
 }
@@ -106,17 +106,10 @@ const FLUSH: f32 = 1e-10;
 /// A 3x3 matrix of lanes, row-major.
 pub(crate) type Mat<L> = [[L; 3]; 3];
 
-/// Builds a matrix entry by entry (written out: `array::map` does not reliably inline).
-#[inline(always)]
-pub(crate) fn mat<L: Lanes>(f: impl Fn(usize, usize) -> L) -> Mat<L> {
-    let row = |i| [f(i, 0), f(i, 1), f(i, 2)];
-    [row(0), row(1), row(2)]
-}
-
 /// `a * b`.
 #[inline(always)]
 fn mat_mul<L: Lanes>(a: &Mat<L>, b: &Mat<L>) -> Mat<L> {
-    mat(|i, j| a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j])
+    mat3!(i, j => a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j])
 }
 
 /// One approximate Jacobi rotation of the symmetric `s` in the (P, Q) plane ((P, Q, K) cyclic):
@@ -127,7 +120,6 @@ fn jacobi_rotation<L: Lanes, const P: usize, const Q: usize, const K: usize>(
     s: &mut Mat<L>,
     quat: &mut [L; 4],
 ) {
-    let flush = |x: L| L::select(x.abs().lt(L::splat(FLUSH)), L::splat(0.0), x);
     let two = L::splat(2.0);
     let (spp, sqq, skk, spq) = (s[P][P], s[Q][Q], s[K][K], s[P][Q]);
     // Flushed here, off the critical path; s_pq is flushed whenever it enters another rotation.
@@ -165,6 +157,20 @@ fn jacobi_rotation<L: Lanes, const P: usize, const Q: usize, const K: usize>(
     quat[Q] = ch * vq - sh * vp;
     quat[K] = ch * vk + sh * vw;
     quat[3] = ch * vw - sh * vk;
+}
+
+/// Zero where `|x|` is below [`FLUSH`].
+#[inline(always)]
+fn flush<L: Lanes>(x: L) -> L {
+    L::select(x.abs().lt(L::splat(FLUSH)), L::splat(0.0), x)
+}
+
+/// One cyclic Jacobi sweep: the rotations in the (0, 1), (1, 2) and (2, 0) planes.
+#[inline(always)]
+fn sweep<L: Lanes>(s: &mut Mat<L>, quat: &mut [L; 4]) {
+    jacobi_rotation::<L, 0, 1, 2>(s, quat);
+    jacobi_rotation::<L, 1, 2, 0>(s, quat);
+    jacobi_rotation::<L, 2, 0, 1>(s, quat);
 }
 
 /// Mask of the lanes whose `s` is not yet diagonal to [`JACOBI_TOLERANCE`].
@@ -268,38 +274,45 @@ impl<L: Lanes> LaneSvd<L> {
 #[inline(always)]
 pub(crate) fn svd_lanes<L: Lanes>(a: &Mat<L>, frame: [L; 4]) -> LaneSvd<L> {
     // 1. Exact power-of-two scaling: largest |entry| into [1, 2).
-    let m = |i: usize| a[i][0].abs().max(a[i][1].abs()).max(a[i][2].abs());
-    let max_abs = m(0).max(m(1)).max(m(2));
+    let row_max = array3!(i => a[i][0].abs().max(a[i][1].abs()).max(a[i][2].abs()));
+    let max_abs = row_max[0].max(row_max[1]).max(row_max[2]);
     let (scale, unscale) = max_abs.pow2_normalizers();
-    let a = mat(|i, j| a[i][j] * scale);
+    let a = mat3!(i, j => a[i][j] * scale);
 
     // 2. Jacobi eigen-decomposition of s = v0^T a^T a v0, v accumulated as a quaternion.
     let mut quat = frame;
     let b0 = mat_mul(&a, &quat_to_mat(quat));
-    let mut s = mat(|i, j| b0[0][i] * b0[0][j] + b0[1][i] * b0[1][j] + b0[2][i] * b0[2][j]);
-    let mut sweeps = 0;
-    loop {
-        jacobi_rotation::<L, 0, 1, 2>(&mut s, &mut quat);
-        jacobi_rotation::<L, 1, 2, 0>(&mut s, &mut quat);
-        jacobi_rotation::<L, 2, 0, 1>(&mut s, &mut quat);
-        sweeps += 1;
-        if sweeps >= MAX_SWEEPS || (sweeps >= MIN_SWEEPS && !not_converged(&s).any()) {
+    let mut s = mat3!(i, j => b0[0][i] * b0[0][j] + b0[1][i] * b0[1][j] + b0[2][i] * b0[2][j]);
+    for _ in 0..MIN_SWEEPS {
+        sweep(&mut s, &mut quat);
+    }
+    let mut sweeps = MIN_SWEEPS;
+    // Further sweeps only change the lanes not yet converged: a lane's sweeps, and so its bits,
+    // do not depend on its neighbours.
+    while sweeps < MAX_SWEEPS {
+        let active = not_converged(&s);
+        if !active.any() {
             break;
         }
+        let (mut s_next, mut quat_next) = (s, quat);
+        sweep(&mut s_next, &mut quat_next);
+        s = mat3!(i, j => L::select(active, s_next[i][j], s[i][j]));
+        let [x, y, z] = array3!(k => L::select(active, quat_next[k], quat[k]));
+        quat = [x, y, z, L::select(active, quat_next[3], quat[3])];
+        sweeps += 1;
     }
     let mut v = quat_to_mat(quat);
 
     // 3. b = a v, columns by decreasing norm.
     let mut b = mat_mul(&a, &v);
-    let norm2 = |j: usize| b[0][j] * b[0][j] + b[1][j] * b[1][j] + b[2][j] * b[2][j];
-    let mut norm2 = [norm2(0), norm2(1), norm2(2)];
+    let mut norm2 = array3!(j => b[0][j] * b[0][j] + b[1][j] * b[1][j] + b[2][j] * b[2][j]);
     sort_columns::<L, 0, 1>(&mut b, &mut v, &mut norm2);
     sort_columns::<L, 0, 2>(&mut b, &mut v, &mut norm2);
     sort_columns::<L, 1, 2>(&mut b, &mut v, &mut norm2);
 
     // 4. QR: b = u r, sigma = diag(r) (r_00, r_11 >= 0; r_22 carries the sign of det a).
     let (zero, one) = (L::splat(0.0), L::splat(1.0));
-    let mut u = mat(|i, j| if i == j { one } else { zero });
+    let mut u = mat3!(i, j => if i == j { one } else { zero });
     qr_rotation::<L, 0, 1>(&mut b, &mut u);
     qr_rotation::<L, 0, 2>(&mut b, &mut u);
     qr_rotation::<L, 1, 2>(&mut b, &mut u);
@@ -536,6 +549,38 @@ mod tests {
         }
     }
 
+    /// Each lane of a wide decomposition is the same bits as the matrix decomposed alone, though
+    /// its neighbours need more sweeps (random matrices, cold, beside near-rotations, warm).
+    #[test]
+    fn lanes_are_independent_of_their_neighbours() {
+        let mut rng = SmallRng::seed_from_u64(12);
+        for _ in 0..200 {
+            let a: [Matrix3<f32>; 16] = std::array::from_fn(|l| {
+                if l % 3 == 0 {
+                    gaussian(&mut rng)
+                } else {
+                    rotation(&mut rng) * (Matrix3::identity() + 0.01 * gaussian(&mut rng))
+                }
+            });
+            let frames: [Frame; 16] = std::array::from_fn(|l| {
+                let q = Vector3::from_fn(|_, _| rng.random_range(-0.2..0.2f32));
+                if l % 3 == 0 {
+                    COLD_START
+                } else {
+                    [q.x, q.y, q.z, 1.0]
+                }
+            });
+            let mut wide_frames = frames;
+            let wide = svd3_lanes(&a, &mut wide_frames);
+            for l in 0..16 {
+                let mut frame = frames[l];
+                let alone = svd3_warm(&a[l], &mut frame);
+                assert_eq!(wide[l], alone, "lane {l}");
+                assert_eq!(wide_frames[l], frame, "lane {l}");
+            }
+        }
+    }
+
     /// A frame from the previous substep halves the sweeps, with cold-start accuracy.
     #[test]
     fn warm_start_needs_fewer_sweeps() {
@@ -543,12 +588,12 @@ mod tests {
         let (mut cold_sweeps, mut warm_sweeps) = (0, 0);
         for _ in 0..2_000 {
             let f = rotation(&mut rng) * (Matrix3::identity() + 0.05 * gaussian(&mut rng));
-            let lanes = |a: &Matrix3<f32>| mat(|i, j| F4::splat(a[(i, j)]));
-            let first = svd_lanes::<F4>(&lanes(&f), COLD_START.map(F4::splat));
+            let lanes = |a: &Matrix3<f32>| mat3!(i, j => Wide::<1>::splat(a[(i, j)]));
+            let first = svd_lanes(&lanes(&f), COLD_START.map(Wide::splat));
             cold_sweeps += first.sweeps;
             // One substep later: F <- (I + dt C) F with |dt C| about 1e-3.
             let next = (Matrix3::identity() + 1e-3 * gaussian(&mut rng)) * f;
-            let warm = svd_lanes::<F4>(&lanes(&next), first.frame);
+            let warm = svd_lanes(&lanes(&next), first.frame);
             warm_sweeps += warm.sweeps;
             let mut frame = first.frame.map(|q| q.lane(0));
             let r = svd3_warm(&next, &mut frame);
@@ -589,13 +634,13 @@ mod tests {
         time("svd3, independent calls", 300, &|xs| {
             xs.iter().map(|a| sum(&svd3(a))).sum()
         });
-        time("svd3_x8, 8 matrices per call, cold", 300, &|xs| {
+        time("svd3_lanes, 8 matrices per call, cold", 300, &|xs| {
             let groups = xs
                 .chunks_exact(8)
                 .map(|c| <&[Matrix3<f32>; 8]>::try_from(c).unwrap());
             let mut cold = [COLD_START; 8];
             groups
-                .map(|g| svd3_x8(g, &mut cold).iter().map(sum).sum::<f32>())
+                .map(|g| svd3_lanes(g, &mut cold).iter().map(sum).sum::<f32>())
                 .sum()
         });
         time("svd3, dependent chain (latency)", 300, &|xs| {

@@ -36,6 +36,7 @@ use super::grid::{
 };
 use super::kernel::Stencil;
 use super::particles::{NewParticle, Particles, ReorderScratch};
+use super::simd::InstructionSet;
 use super::sleep::{Sleep, SleepChanges, WakeZone};
 use cpic_grid::{add_impulses, GridColours};
 pub use error::SimError;
@@ -81,6 +82,9 @@ pub struct Solver {
     pub awake_particle_steps: u64,
     /// Largest particle speed after the last substep (m/s).
     max_speed_m_s: f32,
+    /// The instruction set of the wide loops (the particle update): `SANDSTEP_SIMD`, or the best
+    /// this CPU has. Changes speed only: every path gives the same bits.
+    instruction_set: InstructionSet,
     /// Simulated time (s).
     pub time_s: f64,
     /// Substeps taken.
@@ -116,6 +120,7 @@ impl Solver {
             velocity_gradient: Vec::new(),
             transferred_velocity: Vec::new(),
             max_speed_m_s: 0.0,
+            instruction_set: InstructionSet::from_env().unwrap_or_else(|_| InstructionSet::best()),
             time_s: 0.0,
             steps: 0,
             stage_times: StageTimes::default(),
@@ -171,6 +176,16 @@ impl Solver {
     /// Blocks of sand asleep now (0 without `settings.sleep`).
     pub fn asleep_blocks(&self) -> usize {
         self.sleep.as_ref().map_or(0, Sleep::asleep_blocks)
+    }
+
+    /// The instruction set the wide loops run with.
+    pub fn instruction_set(&self) -> InstructionSet {
+        self.instruction_set
+    }
+
+    /// Runs the wide loops with `instruction_set` from now on (the results stay the same bits).
+    pub fn set_instruction_set(&mut self, instruction_set: InstructionSet) {
+        self.instruction_set = instruction_set;
     }
 
     /// The sparse grid (valid after a substep).

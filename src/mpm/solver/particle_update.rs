@@ -1,6 +1,7 @@
 //! Particle update: the deformation gradient `F <- (I + dt C) F` (Hu et al. 2018, eq. 17), the
-//! constitutive update with its plastic projection (eight particles per SIMD call of the 3x3
-//! SVD), the stress for the next P2G, and the blow-up check of every particle.
+//! constitutive update with its plastic projection (as many particles per SIMD call of the 3x3
+//! SVD as the instruction set holds, `simd::InstructionSet`), the stress for the next P2G, and
+//! the blow-up check of every particle.
 
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
@@ -8,10 +9,8 @@ use rayon::prelude::*;
 use super::{split_runs, SimError, Solver, SolverMaterial};
 use crate::mpm::grid::ParticleBlock;
 use crate::mpm::particles::{MaterialId, Particles};
+use crate::mpm::simd::{Lanes, Wide, WithLanes};
 use crate::mpm::svd::{Frame, COLD_START};
-
-/// Particles whose constitutive updates run together (the SVD's SIMD width).
-const LANES: usize = 8;
 
 /// The first bad particle found, by sorted index.
 #[derive(Clone, Debug)]
@@ -36,11 +35,20 @@ impl Solver {
         let blowup_speed_sq = self.settings.blowup_speed_m_s * self.settings.blowup_speed_m_s;
         let materials = &self.materials[..];
         let blocks = &self.grid.particle_blocks;
+        let instruction_set = self.instruction_set;
         let views = UpdateView::split(&mut self.particles, &self.velocity_gradient, blocks);
         let checks = views
             .into_par_iter()
             .zip(blocks.par_iter())
-            .map(|(view, pb)| update_block(view, pb, materials, dt, blowup_speed_sq))
+            .map(|(view, pb)| {
+                instruction_set.dispatch(BlockUpdate {
+                    view,
+                    pb,
+                    materials,
+                    dt,
+                    blowup_speed_sq,
+                })
+            })
             .collect::<Vec<_>>();
         if let Some(sleep) = &mut self.sleep {
             let speeds: Vec<f32> = checks.iter().map(|c| c.max_speed_sq.sqrt()).collect();
@@ -64,24 +72,49 @@ impl Solver {
     }
 }
 
-/// The particle update of one block, eight particles at a time: their constitutive updates
-/// share one 8-lane SVD when they are of one material.
-#[inline(never)]
-fn update_block(
-    view: UpdateView,
-    pb: &ParticleBlock,
-    materials: &[SolverMaterial],
+/// The particle update of one block, as the work of [`crate::mpm::simd::InstructionSet::dispatch`].
+struct BlockUpdate<'a> {
+    view: UpdateView<'a>,
+    pb: &'a ParticleBlock,
+    materials: &'a [SolverMaterial],
     dt: f32,
     blowup_speed_sq: f32,
-) -> BlockCheck {
+}
+
+impl WithLanes for BlockUpdate<'_> {
+    type Output = BlockCheck;
+    #[inline(always)]
+    fn run<const N: usize>(self) -> BlockCheck
+    where
+        Wide<N>: Lanes,
+    {
+        update_block::<N>(self)
+    }
+}
+
+/// The particle update of one block, `N` particles at a time: their constitutive updates share
+/// one `N`-lane SVD when they are of one material; a mixed group goes one particle at a time
+/// (the same bits: lanes do not interact).
+#[inline(always)]
+fn update_block<const N: usize>(work: BlockUpdate) -> BlockCheck
+where
+    Wide<N>: Lanes,
+{
+    let BlockUpdate {
+        view,
+        pb,
+        materials,
+        dt,
+        blowup_speed_sq,
+    } = work;
     let mut check = BlockCheck::default();
-    for chunk in (0..view.deformation.len()).step_by(LANES) {
-        let lanes = (view.deformation.len() - chunk).min(LANES);
+    for chunk in (0..view.deformation.len()).step_by(N) {
+        let lanes = (view.deformation.len() - chunk).min(N);
         // Unused lanes carry an undeformed, unmoved F: harmless for every model.
-        let mut f = [Matrix3::identity(); LANES];
-        let mut step = [Matrix3::zeros(); LANES];
-        let mut vc = [0.0f32; LANES];
-        let mut frames = [COLD_START; LANES];
+        let mut f = [Matrix3::identity(); N];
+        let mut step = [Matrix3::zeros(); N];
+        let mut vc = [0.0f32; N];
+        let mut frames = [COLD_START; N];
         for lane in 0..lanes {
             let i = chunk + lane;
             f[lane] = view.deformation[i];
@@ -96,14 +129,19 @@ fn update_block(
         {
             materials[material as usize]
                 .model
-                .update_x8(&step, &mut f, &mut vc, &mut frames)
+                .update_lanes_of(&step, &mut f, &mut vc, &mut frames)
         } else {
             std::array::from_fn(|lane| {
                 let m = view.material.get(chunk + lane).copied().unwrap_or(material);
-                f[lane] = (Matrix3::identity() + step[lane]) * f[lane];
-                materials[m as usize]
-                    .model
-                    .update(&mut f[lane], &mut vc[lane], &mut frames[lane])
+                let (mut f1, mut vc1, mut frame1) = ([f[lane]], [vc[lane]], [frames[lane]]);
+                let [tau] = materials[m as usize].model.update_lanes_of::<1>(
+                    &[step[lane]],
+                    &mut f1,
+                    &mut vc1,
+                    &mut frame1,
+                );
+                (f[lane], vc[lane], frames[lane]) = (f1[0], vc1[0], frame1[0]);
+                tau
             })
         };
         for lane in 0..lanes {
