@@ -537,13 +537,16 @@ mod tests {
         let stiffness = Sweep::load(Path::new("config/sweeps/robot_stiffness.yaml")).unwrap();
         // Per transfer: the stiff reference and the soft baseline, with AFLIP also the soft
         // sand at the stiff sand's step; CFL 0.2 (reference), 0.4 (baseline) and 0.8 with
-        // AFLIP; three starts each.
+        // AFLIP; five starts each with AFLIP, three with APIC (study 1).
         assert_eq!(stiffness.settings.len(), 8);
         assert!(stiffness
             .settings
             .iter()
             .any(|s| s.name == "soft_at_the_stiff_step"));
-        assert!(stiffness.settings.iter().all(|s| s.start_x_m.len() == 3));
+        assert!(stiffness
+            .settings
+            .iter()
+            .all(|s| s.start_x_m.len() == if s.study == 1 { 3 } else { 5 }));
     }
 
     #[test]
