@@ -138,6 +138,7 @@ impl Constitutive {
             let a = array3!(k => if i == k { one + step[i][k] } else { step[i][k] });
             Wide::splat(0.0) + a[0] * f_old[0][j] + a[1] * f_old[1][j] + a[2] * f_old[2][j]
         });
+        // Written out, as the sweep's select in `svd.rs` (a loop kept them in memory).
         let [qx, qy, qz] = array3!(k => Wide::from_fn(|l| frames[l][k]));
         let out = self.update_lanes(
             &f_trial,
@@ -338,13 +339,14 @@ fn corotated_stress<L: Lanes>(lame: Lame, sigma: [L; 3]) -> [L; 3] {
 /// `U diag(t) U^T`, computed on one triangle and mirrored (exactly symmetric).
 #[inline(always)]
 fn principal_to_tensor<L: Lanes>(u: &Mat<L>, t: [L; 3]) -> Mat<L> {
-    let t = mat3!(i, j => {
+    // All nine formed, the lower three unused (the compiler drops them).
+    let upper = mat3!(i, j => {
         u[i][0] * t[0] * u[j][0] + u[i][1] * t[1] * u[j][1] + u[i][2] * t[2] * u[j][2]
     });
     [
-        [t[0][0], t[0][1], t[0][2]],
-        [t[0][1], t[1][1], t[1][2]],
-        [t[0][2], t[1][2], t[2][2]],
+        [upper[0][0], upper[0][1], upper[0][2]],
+        [upper[0][1], upper[1][1], upper[1][2]],
+        [upper[0][2], upper[1][2], upper[2][2]],
     ]
 }
 

@@ -1,8 +1,8 @@
 //! SIMD lanes written once, compiled per instruction set: [`Wide<N>`] holds `N` f32 lanes and
 //! does every operation lane by lane in plain Rust, which the compiler turns into SSE, AVX2 or
 //! AVX-512 instructions depending on the target features of the function it is inlined into.
-//! [`InstructionSet::dispatch`] runs code under the best features this CPU has (chosen at run
-//! time with the `pulp` crate), with as many lanes as that instruction set holds well.
+//! [`InstructionSet::dispatch`] runs code under the fastest features this CPU has (chosen at run
+//! time with the `pulp` crate, or forced with `SANDSTEP_SIMD`).
 //!
 //! Every operation is exact IEEE arithmetic lane by lane (no fused multiply-add, no estimated
 //! reciprocals), so a lane's result does not depend on the width or the instruction set: every

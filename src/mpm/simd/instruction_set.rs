@@ -24,13 +24,11 @@ pub enum InstructionSet {
     Portable,
 }
 
-/// Lanes per wide loop of each instruction set, chosen by measurement (`docs/performance.md`):
-/// one AVX2 register; 16 lanes (two registers) spilled and ran 25 % slower. The compiler's
-/// vectorisation of 16 lanes with AVX-512 fell back to scalar code in places and ran 35 %
-/// slower than 8, so AVX-512 runs 8 lanes too (with its masks: no faster than AVX2).
-const AVX512_LANES: usize = 8;
-const AVX2_LANES: usize = 8;
-const PORTABLE_LANES: usize = 8;
+/// Lanes of the wide loops, the same for every instruction set, chosen by measurement
+/// (`docs/performance.md`): one AVX2 register. 16 lanes (two AVX2 registers) spilled and ran
+/// 25 % slower; with AVX-512 the compiler left parts of 16- and 32-lane loops scalar, 35-60 %
+/// slower than 8.
+const LANES: usize = 8;
 
 /// Work written once for any number of lanes, run by [`InstructionSet::dispatch`].
 pub trait WithLanes {
@@ -131,28 +129,18 @@ impl InstructionSet {
 
     /// Lanes of its wide loops.
     pub fn lanes(self) -> usize {
-        match self {
-            #[cfg(target_arch = "x86_64")]
-            InstructionSet::Avx512(_) => AVX512_LANES,
-            #[cfg(target_arch = "x86_64")]
-            InstructionSet::Avx2(_) => AVX2_LANES,
-            InstructionSet::Portable => PORTABLE_LANES,
-        }
+        LANES
     }
 
-    /// Runs `work` compiled for this instruction set, with its number of lanes.
+    /// Runs `work` compiled for this instruction set, with [`Self::lanes`] lanes.
     #[inline(always)]
     pub fn dispatch<W: WithLanes>(self, work: W) -> W::Output {
         match self {
             #[cfg(target_arch = "x86_64")]
-            InstructionSet::Avx512(v4) => {
-                pulp::Simd::vectorize(v4, WithFeatures::<W, AVX512_LANES>(work))
-            }
+            InstructionSet::Avx512(v4) => pulp::Simd::vectorize(v4, WithFeatures::<W, LANES>(work)),
             #[cfg(target_arch = "x86_64")]
-            InstructionSet::Avx2(v3) => {
-                pulp::Simd::vectorize(v3, WithFeatures::<W, AVX2_LANES>(work))
-            }
-            InstructionSet::Portable => work.run::<PORTABLE_LANES>(),
+            InstructionSet::Avx2(v3) => pulp::Simd::vectorize(v3, WithFeatures::<W, LANES>(work)),
+            InstructionSet::Portable => work.run::<LANES>(),
         }
     }
 }
