@@ -10,7 +10,7 @@ use crate::mpm::kernel::Kernel;
 use crate::mpm::material::{Constitutive, DruckerPrager, Lame};
 use crate::mpm::simd::InstructionSet;
 use crate::mpm::{
-    NewParticle, Solver, SolverMaterial, SolverSettings, TimeStep, Transfer, Wall, Walls,
+    CpicBand, NewParticle, Solver, SolverMaterial, SolverSettings, TimeStep, Transfer, Wall, Walls,
     DEFAULT_FLIP_RELAXATION_S,
 };
 
@@ -80,6 +80,7 @@ pub fn sand_block(particles: usize) -> Solver {
         blowup_speed_m_s: 100.0,
         transfer: Transfer::default(),
         flip_relaxation_s: DEFAULT_FLIP_RELAXATION_S,
+        cpic_band: CpicBand::default(),
         kernel: Kernel::QuadraticBspline,
         sleep: None,
     };

@@ -6,13 +6,10 @@
 //! neighbours move). About 40 s on 2 cores.
 
 use nalgebra::Vector3;
-use rapier3d::glamx::Vec3;
-use rapier3d::prelude::{RigidBodyBuilder, RigidBodySet};
-use sandstep::coupling::{Coupling, CouplingMode, CpicSurface};
 use sandstep::mpm::Solver;
 
 mod sand_support;
-use sand_support::{collider, sand_solver, DX, SAND};
+use sand_support::{sand_solver, DX, SAND};
 
 /// Sleep settings of the cases: the scene defaults, but sand wakes only 1 cm from a collider's
 /// box (2 cm by default), so that the sand beside the plate's furrow can sleep.
@@ -73,52 +70,15 @@ struct Ploughed {
     blocks_asleep_at_end: usize,
 }
 
-/// A vertical plate (0.2 dx thick, 2 cm wide, 2 cm tall) ploughing the top 1 cm of a settled
-/// layer (20 x 10 x 1.5 cm) along the channel's middle at 0.3 m/s for 0.4 s, then standing.
+/// [`sand_support::plough`] (which stands the plate for 0.15 s at the end), measured.
 fn plough(solver_settings: &str) -> Ploughed {
-    let mut sand = sand_solver(
-        [0.20, 0.10, 0.05],
-        [0.0, 0.0, -9.81],
-        solver_settings,
-        SAND,
-        "[{material: sand, box: {min_m: [0, 0, 0], max_m: [0.20, 0.10, 0.015]}}]",
-    );
-    sand.advance_to(SETTLE_S).unwrap();
-    let speed = 0.3;
-    let mut bodies = RigidBodySet::new();
-    let plate = bodies.insert(
-        RigidBodyBuilder::kinematic_velocity_based()
-            .translation(Vec3::new(0.02, 0.05, 0.015))
-            .linvel(Vec3::new(speed, 0.0, 0.0)),
-    );
-    let surface = CpicSurface::thin_box([0.1 * DX, 0.01, 0.01]);
-    let coupling = Coupling::new(
-        vec![collider("plate", plate, surface, CouplingMode::OneWay)],
-        &bodies,
-    )
-    .unwrap();
-    let until_s = SETTLE_S + 0.4;
-    let (mut impulse_x, start_s) = (0.0f64, sand.time_s);
-    let pushing_from = (sand.steps, sand.awake_particle_steps);
-    while sand.time_s < until_s {
-        let dt = sand.next_dt().min(coupling.max_dt_s(&bodies, DX));
-        let impulses = coupling.substep(&mut sand, &mut bodies, dt).unwrap();
-        impulse_x += impulses[0].linear_n_s.x;
-        let rb = &mut bodies[plate];
-        rb.set_translation(rb.translation() + rb.linvel() * dt, true);
-    }
-    // The plate stops; the sand behind and ahead comes to rest.
-    bodies[plate].set_linvel(Vec3::ZERO, true);
-    let rest_until_s = until_s + 0.15;
-    while sand.time_s < rest_until_s {
-        let dt = sand.next_dt();
-        coupling.substep(&mut sand, &mut bodies, dt).unwrap();
-    }
+    let ploughed = sand_support::plough(solver_settings, 0.15);
+    let sand = &ploughed.sand;
     Ploughed {
-        mean_drag_n: impulse_x / (until_s - start_s),
-        centre_of_mass_m: centre_of_mass(&sand),
-        profile_m: surface_profile(&sand, 20),
-        awake_fraction: awake_fraction_since(&sand, pushing_from),
+        mean_drag_n: ploughed.mean_drag_n,
+        centre_of_mass_m: centre_of_mass(sand),
+        profile_m: surface_profile(sand, 20),
+        awake_fraction: awake_fraction_since(sand, ploughed.pushing_from),
         blocks_woken: sand.sleep_changes.woken,
         blocks_asleep_at_end: sand.asleep_blocks(),
     }

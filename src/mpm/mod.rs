@@ -19,6 +19,6 @@ pub use boundary::{Wall, Walls};
 pub use particles::{NewParticle, Particles};
 pub use sleep::SleepSettings;
 pub use solver::{
-    SimError, Solver, SolverMaterial, SolverSettings, Stage, StageTimes, TimeStep, Transfer,
-    DEFAULT_FLIP_RELAXATION_S,
+    CpicBand, SimError, Solver, SolverMaterial, SolverSettings, Stage, StageTimes, TimeStep,
+    Transfer, DEFAULT_FLIP_RELAXATION_S,
 };

@@ -297,6 +297,7 @@ impl Scene {
             blowup_speed_m_s: s.blowup_speed_m_s,
             transfer: s.transfer,
             flip_relaxation_s: s.flip_relaxation_s,
+            cpic_band: s.cpic_band,
             kernel: s.kernel,
             sleep: s.sleep.map(|c| SleepSettings {
                 speed_m_s: c.speed_m_s,

@@ -7,7 +7,7 @@ use serde::{Deserialize, Deserializer};
 
 use crate::mpm::kernel::Kernel;
 use crate::mpm::DEFAULT_FLIP_RELAXATION_S;
-use crate::mpm::{Transfer, Wall};
+use crate::mpm::{CpicBand, Transfer, Wall};
 
 /// A whole scene file.
 #[derive(Clone, Debug, Deserialize)]
@@ -190,6 +190,12 @@ pub struct SolverConfig {
     /// Default 2e-3 (`DEFAULT_FLIP_RELAXATION_S`).
     #[serde(default = "default_flip_relaxation")]
     pub flip_relaxation_s: f32,
+    /// Transfer of the particles near a collider (CPIC's band): `pic` (the default: plain PIC,
+    /// which damps bodies resting on sand but makes a plough's drag grow with the substep
+    /// count) or `bulk` (as `transfer`: converged in the step, but resting bodies ring; for
+    /// study). `docs/speed-vs-accuracy.md`, "The CPIC band".
+    #[serde(default)]
+    pub cpic_band: CpicBand,
     /// Interpolation kernel: `quadratic_bspline` (the default) or `linear` (the tent, whose
     /// gradient jumps at cell boundaries; for comparison: `docs/stability.md`).
     #[serde(default)]
@@ -249,6 +255,7 @@ impl Default for SolverConfig {
             blowup_speed_m_s: default_blowup_speed(),
             transfer: Transfer::default(),
             flip_relaxation_s: default_flip_relaxation(),
+            cpic_band: CpicBand::default(),
             kernel: Kernel::default(),
             sleep: None,
         }

@@ -110,6 +110,65 @@ pub fn push_plate_through_layer(method: CouplingMethod) -> (usize, usize) {
     (behind, swept)
 }
 
+/// A plate ploughing a settled layer, and what it measured.
+pub struct Plough {
+    /// The sand at the end.
+    pub sand: Solver,
+    /// Mean x force of the sand on the plate while it pushes (N).
+    pub mean_drag_n: f64,
+    /// The solver's `(steps, awake_particle_steps)` when the push began.
+    pub pushing_from: (u64, u64),
+}
+
+/// A vertical plate (0.2 dx thick, 2 cm wide, 2 cm tall) ploughing the top 1 cm of a layer
+/// (20 x 10 x 1.5 cm) settled for 0.15 s, along the channel's middle at 0.3 m/s for 0.4 s, then
+/// standing for `rest_s`.
+pub fn plough(solver_settings: &str, rest_s: f64) -> Plough {
+    let mut sand = sand_solver(
+        [0.20, 0.10, 0.05],
+        [0.0, 0.0, -9.81],
+        solver_settings,
+        SAND,
+        "[{material: sand, box: {min_m: [0, 0, 0], max_m: [0.20, 0.10, 0.015]}}]",
+    );
+    let settle_s = 0.15;
+    sand.advance_to(settle_s).unwrap();
+    let speed = 0.3;
+    let mut bodies = RigidBodySet::new();
+    let plate = bodies.insert(
+        RigidBodyBuilder::kinematic_velocity_based()
+            .translation(Vec3::new(0.02, 0.05, 0.015))
+            .linvel(Vec3::new(speed, 0.0, 0.0)),
+    );
+    let surface = CpicSurface::thin_box([0.1 * DX, 0.01, 0.01]);
+    let coupling = Coupling::new(
+        vec![collider("plate", plate, surface, CouplingMode::OneWay)],
+        &bodies,
+    )
+    .unwrap();
+    let until_s = settle_s + 0.4;
+    let (mut impulse_x, start_s) = (0.0f64, sand.time_s);
+    let pushing_from = (sand.steps, sand.awake_particle_steps);
+    while sand.time_s < until_s {
+        let dt = sand.next_dt().min(coupling.max_dt_s(&bodies, DX));
+        let impulses = coupling.substep(&mut sand, &mut bodies, dt).unwrap();
+        impulse_x += impulses[0].linear_n_s.x;
+        let rb = &mut bodies[plate];
+        rb.set_translation(rb.translation() + rb.linvel() * dt, true);
+    }
+    bodies[plate].set_linvel(Vec3::ZERO, true);
+    let rest_until_s = until_s + rest_s;
+    while sand.time_s < rest_until_s {
+        let dt = sand.next_dt();
+        coupling.substep(&mut sand, &mut bodies, dt).unwrap();
+    }
+    Plough {
+        sand,
+        mean_drag_n: impulse_x / (until_s - start_s),
+        pushing_from,
+    }
+}
+
 pub fn collider(
     name: &str,
     body: RigidBodyHandle,

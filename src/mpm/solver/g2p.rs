@@ -9,7 +9,7 @@ use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
 use super::cpic_grid::{add_impulses, CpicParticle, CpicTransfer, GridColours};
-use super::{local_base, scale_columns, split_runs, Solver, Transfer};
+use super::{local_base, scale_columns, split_runs, CpicBand, Solver, Transfer};
 use crate::mpm::cpic::{
     conflict_normal, conflicts, ghost_velocity, stencil_nodes, wall_distance, ColliderImpulse,
     ColliderMotion, PENALTY_MAX_CELLS, PENALTY_MIN_CELLS,
@@ -38,6 +38,7 @@ impl Solver {
             lo: self.bounds[0],
             hi: self.bounds[1],
             affine_transfer: self.settings.transfer != Transfer::Pic,
+            band_as_bulk: self.settings.cpic_band == CpicBand::Bulk,
             flip: (self.settings.transfer == Transfer::Aflip).then_some(Flip {
                 transferred_velocity: &self.transferred_velocity,
                 blend: flip_blend(dt, self.settings.flip_relaxation_s),
@@ -73,6 +74,8 @@ struct G2pContext<'a> {
     hi: Vector3<f32>,
     /// Keep the affine matrix for the next P2G (APIC, AFLIP) or not (PIC).
     affine_transfer: bool,
+    /// Particles in the CPIC band transfer as the bulk does (`CpicBand::Bulk`), not as PIC.
+    band_as_bulk: bool,
     /// AFLIP's FLIP increment, or none (APIC, PIC).
     flip: Option<Flip<'a>>,
     kernel: Kernel,
@@ -138,6 +141,15 @@ impl KeptDeviation {
         }
     }
 
+    /// Keeps `blend` of the velocity deviation `velocity` only (in the CPIC band, where the
+    /// affine field is the one CPIC's gather gives, ghosts included).
+    fn of_velocity(blend: f32, velocity: Vector3<f32>) -> Self {
+        KeptDeviation {
+            velocity: velocity * blend,
+            affine: Matrix3::zeros(),
+        }
+    }
+
     /// Adds to the affine field the spin that balances advecting with the PIC velocity
     /// `v_pic` (m/s) over `dt` (s): the kept velocity's moment about the moved particle differs
     /// by `dt v_pic x dv`, given back as a rotation `omega` of the affine field, whose moment
@@ -179,6 +191,7 @@ fn grid_to_particle_block(
         lo,
         hi,
         affine_transfer,
+        band_as_bulk,
         flip,
         kernel,
     } = *cx;
@@ -191,72 +204,71 @@ fn grid_to_particle_block(
         let s = Stencil::of(kernel, grid.to_grid(&x));
         let base = local_base(&s, pb);
         let tags = view.cpic_tags[i];
-        let near_collider = colour_arena.as_ref().filter(|_| tags != 0);
-        let particle = || CpicParticle {
+        // Near a collider: CPIC's transfer over the compatible nodes, ghosts elsewhere.
+        let cpic = colour_arena
+            .as_ref()
+            .filter(|_| tags != 0)
+            .map(|colour| CpicTransfer {
+                colours: &colour[..],
+                colliders,
+                dx,
+            });
+        let particle = CpicParticle {
             x,
             v: view.velocity[i],
             mass: view.mass[i],
             tags,
         };
-        let (mut v, b) = match near_collider {
-            Some(colour) => {
+        let (mut v, b) = match &cpic {
+            Some(cx) => {
                 if impulses.is_empty() {
                     impulses = vec![ColliderImpulse::default(); colliders.len()];
                 }
-                let cx = CpicTransfer {
-                    colours: &colour[..],
-                    colliders,
-                    dx,
-                };
-                gather_cpic(&arena, &cx, &s, base, &particle(), &mut impulses)
+                gather_cpic(&arena, cx, &s, base, &particle, &mut impulses)
             }
             None => gather(&arena, &s, base),
         };
         // C_p = sum w v_i (x_i - x_p)^T D^-1, with offsets in cells.
         let c = scale_columns(&b, &(s.inverse_moment / dx));
-        // AFLIP: the particle keeps a share of how its velocity and affine field differed from
-        // the grid's its transfer gave, before forces (none near colliders).
-        let kept = match (flip, &arena_transferred, near_collider) {
-            (Some(f), Some(transferred), None) => {
-                let (v_transferred, b_transferred) = gather(transferred, &s, base);
-                let c_transferred = scale_columns(&b_transferred, &(s.inverse_moment / dx));
-                let inverse_moment = s.inverse_moment / (dx * dx);
-                let kept = KeptDeviation::new(
-                    f.blend,
-                    view.velocity[i] - v_transferred,
-                    view.affine[i] - c_transferred,
-                    &inverse_moment,
-                );
-                Some(kept.with_spin_for_advection(&v, dt, &inverse_moment))
-            }
-            _ => None,
-        };
+        // AFLIP: the particle keeps a share of how its velocity (and, away from colliders, its
+        // affine field) differed from the grid's its transfer gave, before forces; in the CPIC
+        // band only with `CpicBand::Bulk`.
+        let kept = flip.zip(arena_transferred.as_ref());
+        let kept = kept.filter(|_| cpic.is_none() || band_as_bulk);
+        let kept = kept.map(|(f, transferred)| {
+            let inverse_moment = s.inverse_moment / (dx * dx);
+            let kept = match &cpic {
+                None => {
+                    let (v_transferred, b_transferred) = gather(transferred, &s, base);
+                    let c_transferred = scale_columns(&b_transferred, &(s.inverse_moment / dx));
+                    KeptDeviation::new(
+                        f.blend,
+                        view.velocity[i] - v_transferred,
+                        view.affine[i] - c_transferred,
+                        &inverse_moment,
+                    )
+                }
+                Some(cx) => {
+                    let compatible = gather_compatible(transferred, cx, &s, base, tags);
+                    let deviation = compatible.deviation(&particle, &view.affine[i], dx);
+                    KeptDeviation::of_velocity(f.blend, deviation)
+                }
+            };
+            kept.with_spin_for_advection(&v, dt, &inverse_moment)
+        });
         // Advected with the grid's (PIC) velocity (Fei et al. 2021).
         let mut x_new = x + v * dt;
-        // Near a collider: plain PIC (no affine transfer) and the penalty push-back.
-        view.affine[i] = if near_collider.is_some() || !affine_transfer {
-            Matrix3::zeros()
-        } else {
+        // In the CPIC band with `CpicBand::Pic`: no affine field (plain PIC).
+        view.affine[i] = if affine_transfer && (cpic.is_none() || band_as_bulk) {
             kept.map_or(c, |k| c + k.affine)
+        } else {
+            Matrix3::zeros()
         };
         if let Some(k) = kept {
             v += k.velocity;
         }
-        if let Some(colour) = near_collider {
-            let cx = CpicTransfer {
-                colours: &colour[..],
-                colliders,
-                dx,
-            };
-            push_back(
-                &cx,
-                &s,
-                base,
-                &particle(),
-                &mut x_new,
-                &mut v,
-                &mut impulses,
-            );
+        if let Some(cx) = &cpic {
+            push_back(cx, &s, base, &particle, &mut x_new, &mut v, &mut impulses);
         }
         view.position[i] = x_new.sup(&lo).inf(&hi);
         view.velocity[i] = v;
@@ -348,6 +360,50 @@ fn gather_cpic(
         b += v_node * w * d.transpose();
     }
     (v, b)
+}
+
+/// AFLIP's transferred grid seen by a particle in the CPIC band, over its compatible nodes
+/// only (the nodes its P2G reached): `sum w v~`, `sum w` and `sum w d` (`d` in cells).
+struct CompatibleTransfer {
+    velocity: Vector3<f32>,
+    weight: f32,
+    offset_cells: Vector3<f32>,
+}
+
+impl CompatibleTransfer {
+    /// The particle's deviation from the transferred grid (m/s), measured so that the band's
+    /// deviations and the bulk's sum to zero momentum: what the particle's P2G left on its
+    /// compatible nodes per unit mass, `W v_p + C_p sum w (x_i - x_p)`, less what those nodes
+    /// give back, `sum w v~_i`. Summed over particles, both sides are `sum_i m~_i v~_i`. Away
+    /// from colliders (`W` = 1, `sum w d` = 0) this is `v_p - v~(x_p)`.
+    fn deviation(&self, p: &CpicParticle, affine: &Matrix3<f32>, dx: f32) -> Vector3<f32> {
+        p.v * self.weight + affine * (self.offset_cells * dx) - self.velocity
+    }
+}
+
+/// Gathers [`CompatibleTransfer`] from the transferred velocities `arena`.
+#[inline(never)]
+fn gather_compatible(
+    arena: &[F4; ARENA_NODES],
+    cx: &CpicTransfer,
+    s: &Stencil,
+    base: [usize; 3],
+    tags: u64,
+) -> CompatibleTransfer {
+    let mut sum = CompatibleTransfer {
+        velocity: Vector3::zeros(),
+        weight: 0.0,
+        offset_cells: Vector3::zeros(),
+    };
+    for (a, w, d) in stencil_nodes(s, base) {
+        if conflicts(cx.colours[a].bits, tags) == 0 {
+            let [x, y, z, _] = arena[a].to_array();
+            sum.velocity += Vector3::new(x, y, z) * w;
+            sum.weight += w;
+            sum.offset_cells += d * w;
+        }
+    }
+    sum
 }
 
 /// CPIC penalty: a particle that ended up between [`PENALTY_MIN_CELLS`] and

@@ -40,7 +40,9 @@ use super::simd::InstructionSet;
 use super::sleep::{Sleep, SleepChanges, WakeZone};
 use cpic_grid::{add_impulses, GridColours};
 pub use error::SimError;
-pub use settings::{SolverMaterial, SolverSettings, TimeStep, Transfer, DEFAULT_FLIP_RELAXATION_S};
+pub use settings::{
+    CpicBand, SolverMaterial, SolverSettings, TimeStep, Transfer, DEFAULT_FLIP_RELAXATION_S,
+};
 pub use stages::{Stage, StageTimes};
 
 /// The explicit MLS-MPM solver.

@@ -7,7 +7,7 @@ use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
 use super::cpic_grid::{add_impulses, CpicParticle, CpicTransfer};
-use super::{local_base, scale_columns, Solver, Transfer};
+use super::{local_base, scale_columns, CpicBand, Solver, Transfer};
 use crate::mpm::cpic::{
     conflict_normal, conflicts, stencil_nodes, ColliderImpulse, ColliderMotion,
 };
@@ -26,15 +26,15 @@ impl Solver {
     ) -> Vec<ColliderImpulse> {
         let dx = self.settings.dx;
         // AFLIP measures a particle's deviation against the grid velocity its transfer alone
-        // gives, without this substep's stress impulse: scattered a second time, stress left out.
-        // Only particles away from colliders go there. Those near one keep no deviation (G2P
-        // gives them CPIC's PIC velocity), so the velocity they would add is not the reference
-        // of any deviation: counted, a particle beside the band kept the band's velocity
-        // difference from its own as a deviation that no one balanced, and a box thrown into
-        // sand lost a third of the momentum (tests/coupling.rs). Left out, the kept deviations
-        // sum to zero momentum: sum_p m_p sum_i w_ip v~_i = sum_i m~_i v~_i = sum_p m_p v_p over
-        // the particles away from colliders.
+        // gives, without this substep's stress impulse: scattered a second time, stress left
+        // out. The particles there are those that keep a deviation, so that the kept
+        // deviations sum to zero momentum: sum_p m_p sum_i w_ip v~_i = sum_i m~_i v~_i. With
+        // `CpicBand::Pic` those near a collider keep none and stay out (counted, a box thrown
+        // into sand lost a third of its momentum, tests/coupling.rs); with `CpicBand::Bulk`
+        // they scatter onto their compatible nodes, as on the grid, and G2P measures their
+        // deviation over the same nodes (`CompatibleTransfer::deviation` in `g2p.rs`).
         let keep_transferred = self.settings.transfer == Transfer::Aflip;
+        let band_as_bulk = self.settings.cpic_band == CpicBand::Bulk;
         if keep_transferred {
             self.transferred_velocity.clear();
             self.transferred_velocity
@@ -92,6 +92,10 @@ impl Solver {
                                 };
                                 scatter_cpic(
                                     &mut arena,
+                                    transferred_arena
+                                        .as_mut()
+                                        .filter(|_| band_as_bulk)
+                                        .map(|t| (t, &q_transfer)),
                                     &cx,
                                     &s,
                                     base,
@@ -99,7 +103,6 @@ impl Solver {
                                     &q_cells,
                                     &mut block_impulses,
                                 );
-                                // Not into the transferred grid: see `particle_to_grid`.
                             }
                             _ => {
                                 scatter(&mut arena, &s, base, m, momentum, &q_cells);
@@ -168,10 +171,13 @@ fn scatter(
 
 /// [`scatter`] with CPIC: a node incompatible with the particle receives nothing; the collider
 /// of the conflict receives, at the node, the momentum the particle would have left there less
-/// what the ghost velocity gives back in G2P.
+/// what the ghost velocity gives back in G2P. With AFLIP, `transferred` is the transferred
+/// grid's arena and the particle's `Q` without stress: its compatible nodes receive there too.
+#[allow(clippy::too_many_arguments)]
 #[inline(never)]
 fn scatter_cpic(
     arena: &mut [F4; ARENA_NODES],
+    mut transferred: Option<(&mut [F4; ARENA_NODES], &Matrix3<f32>)>,
     cx: &CpicTransfer,
     s: &Stencil,
     base: [usize; 3],
@@ -187,6 +193,10 @@ fn scatter_cpic(
         if conflict == 0 {
             let node = F4::from_array([contribution.x, contribution.y, contribution.z, w * p.mass]);
             arena[a] = arena[a] + node;
+            if let Some((transferred, q_transfer)) = &mut transferred {
+                let c = (momentum + *q_transfer * d) * w;
+                transferred[a] = transferred[a] + F4::from_array([c.x, c.y, c.z, w * p.mass]);
+            }
         } else {
             // The collider takes what the node would have received; G2P subtracts what the
             // ghost velocity gives back.

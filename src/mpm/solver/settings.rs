@@ -57,11 +57,29 @@ pub enum Transfer {
     /// share squared of its strain rate's. The share is `blend = exp(-dt / tau)` with the
     /// relaxation time `tau` = [`SolverSettings::flip_relaxation_s`]: the deviation decays at
     /// one rate per second whatever the step, where a fixed share per substep (Fei et al.'s)
-    /// would decay faster the more substeps. Positions move with the grid velocity `sum w v_i'`. Near
-    /// colliders, as with APIC, the CPIC transfer is plain PIC. The default:
-    /// chosen by measurement (docs/speed-vs-accuracy.md, issue 19).
+    /// would decay faster the more substeps. Positions move with the grid velocity `sum w v_i'`.
+    /// Near colliders the transfer is [`SolverSettings::cpic_band`]'s. The default: chosen by
+    /// measurement (docs/speed-vs-accuracy.md, issue 19).
     #[default]
     Aflip,
+}
+
+/// How particles in the CPIC band (a collider within their stencil) are transferred.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CpicBand {
+    /// Plain PIC: CPIC's velocity (ghosts at the nodes across a collider), no affine field, no
+    /// kept deviation. Loses the band's velocity variation at every substep, so a plough's drag
+    /// grows with the substep count (+11 % for 3 x the substeps, docs/speed-vs-accuracy.md);
+    /// damps the ringing of bodies resting on sand. The default.
+    #[default]
+    Pic,
+    /// As the bulk ([`Transfer`]): the affine field CPIC's gather gives, and with AFLIP the
+    /// particle's velocity deviation from the transferred grid over its compatible nodes
+    /// (momentum balanced with the bulk's). A plough's drag then follows the step by under
+    /// 0.3 % over 9 x the substeps, but a ball or a light plate resting on sand rings
+    /// (docs/speed-vs-accuracy.md). For study.
+    Bulk,
 }
 
 /// AFLIP's default relaxation time (s) of a particle's deviation from the grid
@@ -92,6 +110,8 @@ pub struct SolverSettings {
     /// [`Transfer::Aflip`]: each substep keeps `exp(-dt / tau)` of its velocity's and its affine
     /// field's rotation's, the square of that of its strain rate's (0 is APIC's update).
     pub flip_relaxation_s: f32,
+    /// The transfer of particles near colliders.
+    pub cpic_band: CpicBand,
     pub kernel: Kernel,
     /// Sleeping sand (blocks at rest left out of the substep), or none: every particle is
     /// stepped every substep.

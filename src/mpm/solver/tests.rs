@@ -34,6 +34,7 @@ fn settings(gravity: Vector3<f32>, walls: Walls) -> SolverSettings {
         blowup_speed_m_s: 100.0,
         transfer: Transfer::Apic,
         flip_relaxation_s: 0.0,
+        cpic_band: CpicBand::default(),
         kernel: Kernel::QuadraticBspline,
         sleep: None,
     }
