@@ -15,9 +15,8 @@ use sand_support::{sand_solver, DX, SAND};
 /// box (2 cm by default), so that the sand beside the plate's furrow can sleep.
 const SLEEP: &str = "sleep: {wake_margin_m: 0.01}";
 
-/// Sand settles before anything happens (s): long enough for the bed to come to rest and fall
-/// asleep (`after_s` 0.05 s after its particles are slower than 1 cm/s).
-const SETTLE_S: f64 = 0.15;
+/// The dropped cube's bed settles as the plough's layer does before anything happens (s).
+const SETTLE_S: f64 = sand_support::PLOUGH_SETTLE_S;
 
 /// The mean over the run of the particles stepped, as a fraction of all particles.
 fn awake_fraction(sand: &Solver) -> f64 {
@@ -70,7 +69,7 @@ struct Ploughed {
     blocks_asleep_at_end: usize,
 }
 
-/// [`sand_support::plough`] (which stands the plate for 0.15 s at the end), measured.
+/// [`sand_support::plough`] with the plate standing for 0.15 s at the end, measured.
 fn plough(solver_settings: &str) -> Ploughed {
     let ploughed = sand_support::plough(solver_settings, 0.15);
     let sand = &ploughed.sand;

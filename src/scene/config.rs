@@ -192,8 +192,8 @@ pub struct SolverConfig {
     pub flip_relaxation_s: f32,
     /// Transfer of the particles near a collider (CPIC's band): `pic` (the default: plain PIC,
     /// which damps bodies resting on sand but makes a plough's drag grow with the substep
-    /// count) or `bulk` (as `transfer`: converged in the step, but resting bodies ring; for
-    /// study). `docs/speed-vs-accuracy.md`, "The CPIC band".
+    /// count) or `bulk` (as `transfer`: with `aflip` converged in the step, but resting bodies
+    /// ring; for study). `docs/speed-vs-accuracy.md`, "The CPIC band".
     #[serde(default)]
     pub cpic_band: CpicBand,
     /// Interpolation kernel: `quadratic_bspline` (the default) or `linear` (the tent, whose

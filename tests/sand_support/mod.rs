@@ -110,6 +110,10 @@ pub fn push_plate_through_layer(method: CouplingMethod) -> (usize, usize) {
     (behind, swept)
 }
 
+/// How long the plough's layer settles (s): long enough to come to rest and, with sleeping
+/// sand, fall asleep (`after_s` 0.05 s after its particles are slower than 1 cm/s).
+pub const PLOUGH_SETTLE_S: f64 = 0.15;
+
 /// A plate ploughing a settled layer, and what it measured.
 pub struct Plough {
     /// The sand at the end.
@@ -121,7 +125,7 @@ pub struct Plough {
 }
 
 /// A vertical plate (0.2 dx thick, 2 cm wide, 2 cm tall) ploughing the top 1 cm of a layer
-/// (20 x 10 x 1.5 cm) settled for 0.15 s, along the channel's middle at 0.3 m/s for 0.4 s, then
+/// (20 x 10 x 1.5 cm) settled for [`PLOUGH_SETTLE_S`], along the channel's middle at 0.3 m/s for 0.4 s, then
 /// standing for `rest_s`.
 pub fn plough(solver_settings: &str, rest_s: f64) -> Plough {
     let mut sand = sand_solver(
@@ -131,7 +135,7 @@ pub fn plough(solver_settings: &str, rest_s: f64) -> Plough {
         SAND,
         "[{material: sand, box: {min_m: [0, 0, 0], max_m: [0.20, 0.10, 0.015]}}]",
     );
-    let settle_s = 0.15;
+    let settle_s = PLOUGH_SETTLE_S;
     sand.advance_to(settle_s).unwrap();
     let speed = 0.3;
     let mut bodies = RigidBodySet::new();
@@ -156,6 +160,7 @@ pub fn plough(solver_settings: &str, rest_s: f64) -> Plough {
         let rb = &mut bodies[plate];
         rb.set_translation(rb.translation() + rb.linvel() * dt, true);
     }
+    // The plate stops; the sand behind and ahead comes to rest.
     bodies[plate].set_linvel(Vec3::ZERO, true);
     let rest_until_s = until_s + rest_s;
     while sand.time_s < rest_until_s {

@@ -84,9 +84,10 @@ struct G2pContext<'a> {
 /// What AFLIP's velocity update reads besides the updated grid.
 #[derive(Clone, Copy)]
 struct Flip<'a> {
-    /// Node velocities from the transfer alone of the particles away from colliders (m/s), by
-    /// grid block: the grid velocity the particle deviates from. (Measured against the node velocity with the
-    /// stress impulse in, a particle at rest kept `-a tau` for the stress's acceleration `a`,
+    /// Node velocities from the transfer alone of the particles that keep a deviation (m/s;
+    /// those away from colliders, and with `CpicBand::Bulk` those near one over their
+    /// compatible nodes), by grid block: the grid velocity the particle deviates from.
+    /// (Measured against the node velocity with the stress impulse in, a particle at rest kept `-a tau` for the stress's acceleration `a`,
     /// and the sand under gravity pressed itself down with several g.)
     transferred_velocity: &'a [Block],
     /// Share of the particle's own deviation kept this substep, `exp(-dt / tau)`.
@@ -362,22 +363,25 @@ fn gather_cpic(
     (v, b)
 }
 
-/// AFLIP's transferred grid seen by a particle in the CPIC band, over its compatible nodes
-/// only (the nodes its P2G reached): `sum w v~`, `sum w` and `sum w d` (`d` in cells).
+/// AFLIP's transferred grid seen by a particle in the CPIC band, summed over its compatible
+/// nodes only (the nodes its P2G reached).
 struct CompatibleTransfer {
-    velocity: Vector3<f32>,
+    /// `sum w v~_i` (m/s).
+    weighted_velocity: Vector3<f32>,
+    /// `sum w`, the share of the stencil that is compatible.
     weight: f32,
-    offset_cells: Vector3<f32>,
+    /// `sum w d_i`, `d_i` the node's offset from the particle in cells.
+    weighted_offset_cells: Vector3<f32>,
 }
 
 impl CompatibleTransfer {
     /// The particle's deviation from the transferred grid (m/s), measured so that the band's
     /// deviations and the bulk's sum to zero momentum: what the particle's P2G left on its
     /// compatible nodes per unit mass, `W v_p + C_p sum w (x_i - x_p)`, less what those nodes
-    /// give back, `sum w v~_i`. Summed over particles, both sides are `sum_i m~_i v~_i`. Away
-    /// from colliders (`W` = 1, `sum w d` = 0) this is `v_p - v~(x_p)`.
+    /// give back, `sum w v~_i`. Summed over particles with their masses, both parts are
+    /// `sum_i m~_i v~_i`. Away from colliders (`W` = 1, `sum w d` = 0) this is `v_p - v~(x_p)`.
     fn deviation(&self, p: &CpicParticle, affine: &Matrix3<f32>, dx: f32) -> Vector3<f32> {
-        p.v * self.weight + affine * (self.offset_cells * dx) - self.velocity
+        p.v * self.weight + affine * (self.weighted_offset_cells * dx) - self.weighted_velocity
     }
 }
 
@@ -391,16 +395,16 @@ fn gather_compatible(
     tags: u64,
 ) -> CompatibleTransfer {
     let mut sum = CompatibleTransfer {
-        velocity: Vector3::zeros(),
+        weighted_velocity: Vector3::zeros(),
         weight: 0.0,
-        offset_cells: Vector3::zeros(),
+        weighted_offset_cells: Vector3::zeros(),
     };
     for (a, w, d) in stencil_nodes(s, base) {
         if conflicts(cx.colours[a].bits, tags) == 0 {
             let [x, y, z, _] = arena[a].to_array();
-            sum.velocity += Vector3::new(x, y, z) * w;
+            sum.weighted_velocity += Vector3::new(x, y, z) * w;
             sum.weight += w;
-            sum.offset_cells += d * w;
+            sum.weighted_offset_cells += d * w;
         }
     }
     sum

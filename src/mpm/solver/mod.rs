@@ -73,7 +73,8 @@ pub struct Solver {
     /// substep (the affine matrix kept for P2G is `C` under APIC and zero under PIC).
     velocity_gradient: Vec<Matrix3<f32>>,
     /// AFLIP: the velocity (m/s; momentum in P2G) each grid node gets from the transfer alone
-    /// of the particles away from colliders, `sum w m (v + C (x_i - x_p)) / m_i`, without the
+    /// of the particles that keep a deviation (away from colliders; with `CpicBand::Bulk` also
+    /// those near one, on their compatible nodes), `sum w m (v + C (x_i - x_p)) / m_i`, without the
     /// stress impulse, gravity and walls; zero where no mass; in the order of the grid's blocks.
     transferred_velocity: Vec<Block>,
     /// Which blocks sleep (`settings.sleep`).

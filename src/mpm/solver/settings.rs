@@ -76,8 +76,9 @@ pub enum CpicBand {
     Pic,
     /// As the bulk ([`Transfer`]): the affine field CPIC's gather gives, and with AFLIP the
     /// particle's velocity deviation from the transferred grid over its compatible nodes
-    /// (momentum balanced with the bulk's). A plough's drag then follows the step by under
-    /// 0.3 % over 9 x the substeps, but a ball or a light plate resting on sand rings
+    /// (momentum balanced with the bulk's). With AFLIP a plough's drag then moves by 0.2 % over
+    /// 9 x the substeps (with APIC still 12 % over 3 x), but a ball or a light plate resting on
+    /// sand rings
     /// (docs/speed-vs-accuracy.md). For study.
     Bulk,
 }
