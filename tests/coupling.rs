@@ -44,7 +44,10 @@ fn a_ploughs_drag_follows_the_substep_only_through_the_cpic_bands_pic() {
     let change = |band: &str| {
         let default_step = drag(&format!("cpic_band: {band}"));
         let small_step = drag(&format!("cpic_band: {band}, {third_step}"));
-        println!("cpic_band {band}: drag {default_step:.4} N, with a third of the step {small_step:.4} N");
+        println!(
+            "cpic_band {band}: drag {default_step:.4} N, with a third of the step \
+             {small_step:.4} N"
+        );
         small_step / default_step - 1.0
     };
     let bulk = change("bulk");

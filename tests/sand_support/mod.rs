@@ -125,8 +125,8 @@ pub struct Plough {
 }
 
 /// A vertical plate (0.2 dx thick, 2 cm wide, 2 cm tall) ploughing the top 1 cm of a layer
-/// (20 x 10 x 1.5 cm) settled for [`PLOUGH_SETTLE_S`], along the channel's middle at 0.3 m/s for 0.4 s, then
-/// standing for `rest_s`.
+/// (20 x 10 x 1.5 cm) settled for [`PLOUGH_SETTLE_S`], along the channel's middle at 0.3 m/s
+/// for 0.4 s, then standing for `rest_s`.
 pub fn plough(solver_settings: &str, rest_s: f64) -> Plough {
     let mut sand = sand_solver(
         [0.20, 0.10, 0.05],

@@ -87,8 +87,9 @@ struct Flip<'a> {
     /// Node velocities from the transfer alone of the particles that keep a deviation (m/s;
     /// those away from colliders, and with `CpicBand::Bulk` those near one over their
     /// compatible nodes), by grid block: the grid velocity the particle deviates from.
-    /// (Measured against the node velocity with the stress impulse in, a particle at rest kept `-a tau` for the stress's acceleration `a`,
-    /// and the sand under gravity pressed itself down with several g.)
+    /// (Measured against the node velocity with the stress impulse in, a particle at rest
+    /// kept `-a tau` for the stress's acceleration `a`, and the sand under gravity pressed
+    /// itself down with several g.)
     transferred_velocity: &'a [Block],
     /// Share of the particle's own deviation kept this substep, `exp(-dt / tau)`.
     blend: f32,
