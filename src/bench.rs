@@ -11,7 +11,7 @@ use crate::mpm::material::{Constitutive, DruckerPrager, Lame};
 use crate::mpm::simd::InstructionSet;
 use crate::mpm::{
     CpicBand, NewParticle, Solver, SolverMaterial, SolverSettings, TimeStep, Transfer, Wall, Walls,
-    DEFAULT_FLIP_RELAXATION_S,
+    DEFAULT_CPIC_BAND_RELAXATION_S, DEFAULT_FLIP_RELAXATION_S,
 };
 
 /// Benchmark sand: Klar et al. (2016) parameters.
@@ -81,6 +81,7 @@ pub fn sand_block(particles: usize) -> Solver {
         transfer: Transfer::default(),
         flip_relaxation_s: DEFAULT_FLIP_RELAXATION_S,
         cpic_band: CpicBand::default(),
+        cpic_band_relaxation_s: DEFAULT_CPIC_BAND_RELAXATION_S,
         kernel: Kernel::QuadraticBspline,
         sleep: None,
     };

@@ -74,6 +74,18 @@ fn out_of_range_values() {
             "sand.solver.flip_relaxation_s",
         ),
         (
+            "sand.solver.cpic_band_relaxation_s=-1e-3",
+            "sand.solver.cpic_band_relaxation_s",
+        ),
+        (
+            "sand.materials.sand.elastic_viscosity_pa_s=-5",
+            "sand.materials.sand.elastic_viscosity_pa_s",
+        ),
+        (
+            "sand.materials.sand.elastic_viscosity_pa_s=.inf",
+            "sand.materials.sand.elastic_viscosity_pa_s",
+        ),
+        (
             "sand.domain.walls.z_min={friction: -1}",
             "sand.domain.walls.z_min",
         ),

@@ -140,6 +140,48 @@ fn a_fixed_step_beyond_cfl_blows_up_and_is_reported_the_adaptive_step_is_stable(
     assert!(fastest < 0.5, "the pile must settle ({fastest} m/s)");
 }
 
+/// Case 5, viscous. The sand's in-cone viscosity eta bounds the explicit step by
+/// `rho dx^2 / (2 eta)` (`docs/physics.md`, "Time step"): a sand twenty times as viscous as the
+/// test sand (1000 Pa s: 2.0e-5 s at dx = 5 mm) shakes itself apart at the elastic CFL step,
+/// and the adaptive step, which takes the viscous bound, lets the same pile settle.
+#[test]
+fn a_viscous_sand_settles_only_within_the_viscous_step_bound() {
+    let viscous = SAND.replace("elastic_viscosity_pa_s: 50", "elastic_viscosity_pa_s: 1000");
+    assert_ne!(viscous, SAND);
+    let fastest = |s: &Solver| {
+        s.particles
+            .velocity
+            .iter()
+            .map(|v| v.norm())
+            .fold(0.0f32, f32::max)
+    };
+    let mut adaptive = solver([0.0, 0.0, -9.81], "cfl: 0.4", &viscous, PILE);
+    let dt = adaptive.next_dt();
+    let bound = 1600.0 * 0.005f32.powi(2) / (2.0 * 1000.0);
+    assert!(
+        (dt - bound).abs() < 1e-3 * bound,
+        "step {dt} s, bound {bound} s"
+    );
+    // The elastic CFL step at CFL 0.4: 0.4 dx / 17 m/s = 1.17e-4 s.
+    let mut elastic_step = solver([0.0, 0.0, -9.81], "fixed_dt_s: 1.1e-4", &viscous, PILE);
+    let end_s = 0.3;
+    let within = fastest(&{
+        adaptive.advance_to(end_s).unwrap();
+        adaptive
+    });
+    let beyond = elastic_step
+        .advance_to(end_s)
+        .map(|_| fastest(&elastic_step));
+    println!(
+        "viscous pile at {end_s} s: fastest {within} m/s within the bound; beyond: {beyond:?}"
+    );
+    assert!(within < 0.5, "the pile must settle ({within} m/s)");
+    assert!(
+        !matches!(beyond, Ok(v) if v < 5.0),
+        "beyond the bound the pile settled too ({beyond:?} m/s): is the bound needed?"
+    );
+}
+
 /// Root-mean-square distance of the particles from their centre of mass (m).
 fn rms_radius_m(s: &Solver) -> f64 {
     let p = &s.particles;

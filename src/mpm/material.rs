@@ -59,6 +59,10 @@ pub struct DruckerPrager {
     /// Remember the volume removed by projections to the cone tip and give it back on later
     /// compression, so sand does not gain volume every time it is pulled apart.
     pub volume_correction: bool,
+    /// Viscosity eta (Pa s, >= 0) of the sand inside its cone: a particle whose return mapping
+    /// changed nothing adds the Kelvin-Voigt stress `J eta (L + L^T)` (L the velocity gradient)
+    /// to its Kirchhoff stress. Damps elastic vibration; yielding sand does not see it.
+    pub elastic_viscosity_pa_s: f32,
 }
 
 impl DruckerPrager {
@@ -69,6 +73,7 @@ impl DruckerPrager {
             lame,
             alpha: (2.0f32 / 3.0).sqrt() * 2.0 * sin_phi / (3.0 - sin_phi),
             volume_correction,
+            elastic_viscosity_pa_s: 0.0,
         }
     }
 }
@@ -117,8 +122,10 @@ impl Constitutive {
     }
 
     /// The substep's deformation update of `N` particles at once: `f` holds F at the start of
-    /// the substep and `step` = dt grad v (MLS-MPM: dt C_p); the trial `F = (I + step) F` is formed
-    /// and then updated as by [`Self::update`]. Each lane is the same bits at any `N`.
+    /// the substep and `step` = dt grad v (MLS-MPM: dt C_p) over the substep `dt_s` (s); the
+    /// trial `F = (I + step) F` is formed and then updated as by [`Self::update`], and sand
+    /// inside its cone adds its viscous stress ([`DruckerPrager::elastic_viscosity_pa_s`]).
+    /// Each lane is the same bits at any `N`.
     #[inline(always)]
     pub fn update_lanes_of<const N: usize>(
         &self,
@@ -126,6 +133,7 @@ impl Constitutive {
         f: &mut [Matrix3<f32>; N],
         volume_correction: &mut [f32; N],
         frames: &mut [Frame; N],
+        dt_s: f32,
     ) -> [Matrix3<f32>; N]
     where
         Wide<N>: Lanes,
@@ -145,12 +153,22 @@ impl Constitutive {
             Wide::from_fn(|l| volume_correction[l]),
             [qx, qy, qz, Wide::from_fn(|l| frames[l][3])],
         );
+        let tau = match (self, out.in_cone) {
+            (Self::DruckerPrager(dp), Some(in_cone)) if dp.elastic_viscosity_pa_s > 0.0 => {
+                // J eta (L + L^T) with L = step / dt, where the return mapping changed nothing.
+                let scale = in_cone.jacobian * Wide::splat(dp.elastic_viscosity_pa_s / dt_s);
+                let zero = Wide::splat(0.0);
+                mat3!(i, j => out.tau[i][j]
+                    + Wide::select(in_cone.mask, scale * (step[i][j] + step[j][i]), zero))
+            }
+            _ => out.tau,
+        };
         for l in 0..N {
             f[l] = Matrix3::from_fn(|i, j| out.f[i][j].lane(l));
             volume_correction[l] = out.volume_correction.lane(l);
             frames[l] = out.frame.map(|q| q.lane(l));
         }
-        std::array::from_fn(|l| Matrix3::from_fn(|i, j| out.tau[i][j].lane(l)))
+        std::array::from_fn(|l| Matrix3::from_fn(|i, j| tau[i][j].lane(l)))
     }
 
     /// Kirchhoff stress (Pa) of a given F without any projection (used at initialisation).
@@ -180,10 +198,10 @@ impl Constitutive {
         frame: [L; 4],
     ) -> LaneUpdate<L> {
         let svd = svd_lanes(f, frame);
-        let (f, tau, volume_correction) = match self {
+        let (f, tau, volume_correction, in_cone) = match self {
             Self::FixedCorotated(fc) => {
                 let tau = principal_to_tensor(&svd.u, corotated_stress(fc.lame, svd.sigma));
-                (*f, tau, volume_correction)
+                (*f, tau, volume_correction, None)
             }
             Self::DruckerPrager(dp) => {
                 let eps_trial = hencky_strain(svd.sigma);
@@ -201,7 +219,11 @@ impl Constitutive {
                 let unchanged = not_floored.and(same[0]).and(same[1]).and(same[2]);
                 let f = mat3!(i, j => L::select(unchanged, f[i][j], rebuilt[i][j]));
                 let tau = principal_to_tensor(&svd.u, hencky_stress(dp.lame, eps));
-                (f, tau, vc)
+                let in_cone = InCone {
+                    mask: unchanged,
+                    jacobian: exp(eps[0] + eps[1] + eps[2]),
+                };
+                (f, tau, vc, Some(in_cone))
             }
         };
         LaneUpdate {
@@ -209,6 +231,7 @@ impl Constitutive {
             tau,
             volume_correction,
             frame: svd.frame,
+            in_cone,
         }
     }
 
@@ -312,6 +335,17 @@ struct LaneUpdate<L> {
     tau: Mat<L>,
     volume_correction: L,
     frame: [L; 4],
+    /// Sand only: the lanes its return mapping left unchanged.
+    in_cone: Option<InCone<L>>,
+}
+
+/// The lanes of a Drucker-Prager update inside the cone, for the in-cone viscosity.
+#[derive(Clone, Copy)]
+struct InCone<L> {
+    /// All ones where the return mapping changed nothing.
+    mask: L,
+    /// J = det F of the updated F.
+    jacobian: L,
 }
 
 /// Hencky strain `ln max(|sigma|, MIN_SINGULAR_VALUE)` of singular values.
@@ -556,6 +590,46 @@ mod tests {
         }
     }
 
+    /// The in-cone viscosity adds `J eta (L + L^T)` where the return mapping changes nothing,
+    /// and nothing where the sand yields.
+    #[test]
+    fn elastic_viscosity_acts_inside_the_cone_only() {
+        let (eta, dt) = (50.0f32, 1e-4f32);
+        let viscous = match sand(true) {
+            Constitutive::DruckerPrager(dp) => Constitutive::DruckerPrager(DruckerPrager {
+                elastic_viscosity_pa_s: eta,
+                ..dp
+            }),
+            _ => unreachable!(),
+        };
+        let update = |model: &Constitutive, f0: Matrix3<f32>, l: Matrix3<f32>| {
+            let (mut f, mut vc, mut frame) = ([f0], [0.0], [COLD_START]);
+            let [tau] = model.update_lanes_of(&[l * dt], &mut f, &mut vc, &mut frame, dt);
+            (tau, f[0])
+        };
+        // Compressed by 1 %, sheared slowly (1/s): inside the cone.
+        let compressed = Matrix3::identity() * 0.99;
+        let shear = Matrix3::new(0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -0.5);
+        let (plain, f) = update(&sand(true), compressed, shear);
+        let (damped, _) = update(&viscous, compressed, shear);
+        let expected = (shear + shear.transpose()) * (eta * f.determinant());
+        let error = (damped - plain - expected).norm() / expected.norm();
+        assert!(
+            error < 1e-3,
+            "viscous stress {} against {expected}",
+            damped - plain
+        );
+        // Sheared by 50 % in one step: the sand yields and sees no viscosity.
+        let (plain, f_plain) = update(&sand(true), compressed, shear * (0.5 / dt));
+        let (damped, f_damped) = update(&viscous, compressed, shear * (0.5 / dt));
+        assert_ne!(
+            f_plain,
+            compressed * (Matrix3::identity() + shear * 0.5),
+            "must yield"
+        );
+        assert_eq!((damped, f_damped), (plain, f_plain));
+    }
+
     #[test]
     fn small_stretch_matches_linear_elasticity() {
         let l = lame();
@@ -645,10 +719,11 @@ mod tests {
                 let vc0: [f32; 16] = std::array::from_fn(|_| rng.random_range(0.0..0.1));
                 let step: [Matrix3<f32>; 16] = std::array::from_fn(|_| 0.01 * gaussian(&mut rng));
                 let (mut f16, mut vc16, mut frames) = (f0, vc0, [COLD_START; 16]);
-                let tau16 = model.update_lanes_of(&step, &mut f16, &mut vc16, &mut frames);
+                let tau16 = model.update_lanes_of(&step, &mut f16, &mut vc16, &mut frames, 1e-4);
                 for l in 0..16 {
                     let (mut f1, mut vc1, mut frame1) = ([f0[l]], [vc0[l]], [COLD_START]);
-                    let [tau1] = model.update_lanes_of(&[step[l]], &mut f1, &mut vc1, &mut frame1);
+                    let [tau1] =
+                        model.update_lanes_of(&[step[l]], &mut f1, &mut vc1, &mut frame1, 1e-4);
                     assert_eq!(
                         (tau1, f1[0], vc1[0], frame1[0]),
                         (tau16[l], f16[l], vc16[l], frames[l]),
@@ -734,6 +809,7 @@ mod tests {
                             f,
                             vc.try_into().unwrap(),
                             &mut frames,
+                            1e-4,
                         );
                         tau[0][(0, 1)]
                     })
@@ -764,6 +840,7 @@ mod tests {
                             f,
                             vc.try_into().unwrap(),
                             &mut fr,
+                            1e-4,
                         );
                         tau[0][(0, 1)]
                     })

@@ -20,5 +20,5 @@ pub use particles::{NewParticle, Particles};
 pub use sleep::SleepSettings;
 pub use solver::{
     CpicBand, SimError, Solver, SolverMaterial, SolverSettings, Stage, StageTimes, TimeStep,
-    Transfer, DEFAULT_FLIP_RELAXATION_S,
+    Transfer, DEFAULT_CPIC_BAND_RELAXATION_S, DEFAULT_FLIP_RELAXATION_S,
 };

@@ -82,11 +82,16 @@ pub fn validate(scene: &Scene) -> Result<(), SceneError> {
     if !(s.cfl > 0.0 && s.cfl <= 1.0) {
         return Err(scene.invalid("sand.solver.cfl", format!("{} must be in (0, 1]", s.cfl)));
     }
-    if !(s.flip_relaxation_s >= 0.0 && s.flip_relaxation_s.is_finite()) {
-        return Err(scene.invalid(
-            "sand.solver.flip_relaxation_s",
-            format!("{} must be a finite time >= 0 (s)", s.flip_relaxation_s),
-        ));
+    for (name, tau) in [
+        ("flip_relaxation_s", s.flip_relaxation_s),
+        ("cpic_band_relaxation_s", s.cpic_band_relaxation_s),
+    ] {
+        if !(tau >= 0.0 && tau.is_finite()) {
+            return Err(scene.invalid(
+                format!("sand.solver.{name}"),
+                format!("{tau} must be a finite time >= 0 (s)"),
+            ));
+        }
     }
     positive("sand.solver.max_dt_s", s.max_dt_s as f64)?;
     positive("sand.solver.blowup_speed_m_s", s.blowup_speed_m_s as f64)?;
@@ -111,12 +116,19 @@ pub fn validate(scene: &Scene) -> Result<(), SceneError> {
                 youngs_modulus_pa,
                 poisson_ratio,
                 friction_angle_deg,
+                elastic_viscosity_pa_s,
                 ..
             } => {
                 if !(*friction_angle_deg > 0.0 && *friction_angle_deg < 90.0) {
                     return Err(scene.invalid(
                         field("friction_angle_deg"),
                         format!("{friction_angle_deg} must be in (0, 90) degrees"),
+                    ));
+                }
+                if !(*elastic_viscosity_pa_s >= 0.0 && elastic_viscosity_pa_s.is_finite()) {
+                    return Err(scene.invalid(
+                        field("elastic_viscosity_pa_s"),
+                        format!("{elastic_viscosity_pa_s} must be a finite viscosity >= 0 (Pa s)"),
                     ));
                 }
                 (density_kg_m3, youngs_modulus_pa, poisson_ratio)
@@ -298,6 +310,7 @@ impl Scene {
             transfer: s.transfer,
             flip_relaxation_s: s.flip_relaxation_s,
             cpic_band: s.cpic_band,
+            cpic_band_relaxation_s: s.cpic_band_relaxation_s,
             kernel: s.kernel,
             sleep: s.sleep.map(|c| SleepSettings {
                 speed_m_s: c.speed_m_s,
@@ -340,12 +353,16 @@ fn constitutive(m: &MaterialConfig) -> Constitutive {
             poisson_ratio,
             friction_angle_deg,
             volume_correction,
+            elastic_viscosity_pa_s,
             ..
-        } => Constitutive::DruckerPrager(DruckerPrager::new(
-            Lame::from_young_poisson(youngs_modulus_pa, poisson_ratio),
-            friction_angle_deg.to_radians(),
-            volume_correction,
-        )),
+        } => Constitutive::DruckerPrager(DruckerPrager {
+            elastic_viscosity_pa_s,
+            ..DruckerPrager::new(
+                Lame::from_young_poisson(youngs_modulus_pa, poisson_ratio),
+                friction_angle_deg.to_radians(),
+                volume_correction,
+            )
+        }),
         MaterialConfig::FixedCorotated {
             youngs_modulus_pa,
             poisson_ratio,

@@ -6,8 +6,8 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Deserializer};
 
 use crate::mpm::kernel::Kernel;
-use crate::mpm::DEFAULT_FLIP_RELAXATION_S;
 use crate::mpm::{CpicBand, Transfer, Wall};
+use crate::mpm::{DEFAULT_CPIC_BAND_RELAXATION_S, DEFAULT_FLIP_RELAXATION_S};
 
 /// A whole scene file.
 #[derive(Clone, Debug, Deserialize)]
@@ -190,12 +190,17 @@ pub struct SolverConfig {
     /// Default 2e-3 (`DEFAULT_FLIP_RELAXATION_S`).
     #[serde(default = "default_flip_relaxation")]
     pub flip_relaxation_s: f32,
-    /// Transfer of the particles near a collider (CPIC's band): `pic` (the default: plain PIC,
-    /// which damps bodies resting on sand but makes a plough's drag grow with the substep
-    /// count) or `bulk` (as `transfer`: with `aflip` converged in the step, but resting bodies
-    /// ring; for study). `docs/speed-vs-accuracy.md`, "The CPIC band".
+    /// Transfer of the particles near a collider (CPIC's band): `bulk` (the default: as
+    /// `transfer`; with `aflip` a plough's drag does not follow the substep count) or `pic`
+    /// (plain PIC, whose loss grows with the substep count; for comparison).
+    /// `docs/speed-vs-accuracy.md`, "The CPIC band".
     #[serde(default)]
     pub cpic_band: CpicBand,
+    /// With `cpic_band: bulk` and `transfer: aflip`, the relaxation time (s, >= 0) of the
+    /// velocity deviation of a particle near a collider: each substep of dt keeps
+    /// exp(-dt / tau) of it. Default 5e-4 (`DEFAULT_CPIC_BAND_RELAXATION_S`).
+    #[serde(default = "default_cpic_band_relaxation")]
+    pub cpic_band_relaxation_s: f32,
     /// Interpolation kernel: `quadratic_bspline` (the default) or `linear` (the tent, whose
     /// gradient jumps at cell boundaries; for comparison: `docs/stability.md`).
     #[serde(default)]
@@ -236,6 +241,9 @@ fn default_wake_margin() -> f32 {
 fn default_flip_relaxation() -> f32 {
     DEFAULT_FLIP_RELAXATION_S
 }
+fn default_cpic_band_relaxation() -> f32 {
+    DEFAULT_CPIC_BAND_RELAXATION_S
+}
 fn default_cfl() -> f32 {
     0.4
 }
@@ -256,6 +264,7 @@ impl Default for SolverConfig {
             transfer: Transfer::default(),
             flip_relaxation_s: default_flip_relaxation(),
             cpic_band: CpicBand::default(),
+            cpic_band_relaxation_s: default_cpic_band_relaxation(),
             kernel: Kernel::default(),
             sleep: None,
         }
@@ -280,6 +289,10 @@ pub enum MaterialConfig {
         /// Give back volume gained by expansion on later compression. Default true.
         #[serde(default = "yes")]
         volume_correction: bool,
+        /// Viscosity of the sand inside its yield cone (Pa s), >= 0: damps elastic vibration,
+        /// not flow. Default 0.
+        #[serde(default)]
+        elastic_viscosity_pa_s: f32,
     },
     /// Fixed-corotated elasticity (Stomakhin et al. 2012), for elastic test bodies.
     FixedCorotated {

@@ -537,9 +537,9 @@ mod tests {
         let stiffness = Sweep::load(Path::new("config/sweeps/robot_stiffness.yaml")).unwrap();
         // Per transfer: the stiff reference and the soft baseline, with AFLIP also the soft
         // sand at the stiff sand's step; CFL 0.2 (reference), 0.4 (baseline) and 0.8 with
-        // AFLIP; soft sand at its own and at the stiff step with the CPIC band as the bulk;
-        // five starts each with AFLIP, three with APIC (study 1).
-        assert_eq!(stiffness.settings.len(), 10);
+        // AFLIP; soft sand at its own and at the stiff step with the CPIC band as the bulk,
+        // undamped and damped; five starts each with AFLIP, three with APIC (study 1).
+        assert_eq!(stiffness.settings.len(), 12);
         assert!(stiffness
             .settings
             .iter()

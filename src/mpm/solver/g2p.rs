@@ -9,6 +9,7 @@ use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
 use super::cpic_grid::{add_impulses, CpicParticle, CpicTransfer, GridColours};
+use super::settings::KeptShares;
 use super::{local_base, scale_columns, split_runs, CpicBand, Solver, Transfer};
 use crate::mpm::cpic::{
     conflict_normal, conflicts, ghost_velocity, stencil_nodes, wall_distance, ColliderImpulse,
@@ -41,7 +42,7 @@ impl Solver {
             band_as_bulk: self.settings.cpic_band == CpicBand::Bulk,
             flip: (self.settings.transfer == Transfer::Aflip).then_some(Flip {
                 transferred_velocity: &self.transferred_velocity,
-                blend: flip_blend(dt, self.settings.flip_relaxation_s),
+                shares: self.settings.kept_shares(dt),
             }),
             kernel: self.settings.kernel,
         };
@@ -86,23 +87,15 @@ struct G2pContext<'a> {
 struct Flip<'a> {
     /// Node velocities from the transfer alone of the particles that keep a deviation (m/s;
     /// those away from colliders, and with `CpicBand::Bulk` those near one over their
-    /// compatible nodes), by grid block: the grid velocity the particle deviates from.
+    /// compatible nodes), each weighted by the share it keeps, by grid block: the grid
+    /// velocity the particle deviates from.
     /// (Measured against the node velocity with the stress impulse in, a particle at rest
     /// kept `-a tau` for the stress's acceleration `a`, and the sand under gravity pressed
     /// itself down with several g.)
     transferred_velocity: &'a [Block],
-    /// Share of the particle's own deviation kept this substep, `exp(-dt / tau)`.
-    blend: f32,
-}
-
-/// AFLIP's share of the velocity deviation kept over a substep of `dt` (s) for the relaxation
-/// time `tau_s` (s): `exp(-dt / tau)`, none for `tau_s = 0`.
-fn flip_blend(dt: f32, tau_s: f32) -> f32 {
-    if tau_s > 0.0 {
-        libm::expf(-dt / tau_s)
-    } else {
-        0.0
-    }
+    /// Shares of the particle's own deviation kept this substep, `exp(-dt / tau)`, away from
+    /// colliders and in the CPIC band (`CpicBand::Bulk`).
+    shares: KeptShares,
 }
 
 /// What an AFLIP particle keeps of its deviation from the grid: velocity (m/s) and affine
@@ -244,7 +237,7 @@ fn grid_to_particle_block(
                     let (v_transferred, b_transferred) = gather(transferred, &s, base);
                     let c_transferred = scale_columns(&b_transferred, &(s.inverse_moment / dx));
                     KeptDeviation::new(
-                        f.blend,
+                        f.shares.bulk,
                         view.velocity[i] - v_transferred,
                         view.affine[i] - c_transferred,
                         &inverse_moment,
@@ -253,7 +246,7 @@ fn grid_to_particle_block(
                 Some(cx) => {
                     let compatible = gather_compatible(transferred, cx, &s, base, tags);
                     let deviation = compatible.deviation(&particle, &view.affine[i], dx);
-                    KeptDeviation::of_velocity(f.blend, deviation)
+                    KeptDeviation::of_velocity(f.shares.band, deviation)
                 }
             };
             kept.with_spin_for_advection(&v, dt, &inverse_moment)

@@ -41,7 +41,8 @@ use super::sleep::{Sleep, SleepChanges, WakeZone};
 use cpic_grid::{add_impulses, GridColours};
 pub use error::SimError;
 pub use settings::{
-    CpicBand, SolverMaterial, SolverSettings, TimeStep, Transfer, DEFAULT_FLIP_RELAXATION_S,
+    CpicBand, SolverMaterial, SolverSettings, TimeStep, Transfer, DEFAULT_CPIC_BAND_RELAXATION_S,
+    DEFAULT_FLIP_RELAXATION_S,
 };
 pub use stages::{Stage, StageTimes};
 
@@ -196,7 +197,8 @@ impl Solver {
         &self.grid
     }
 
-    /// Time step the next substep will take (s).
+    /// Time step the next substep will take (s): the CFL bound, `max_dt_s` and the viscous bound
+    /// of every material ([`SolverMaterial::viscous_step_s`]), or the fixed step.
     pub fn next_dt(&self) -> f32 {
         match self.settings.time_step {
             TimeStep::Fixed { dt_s } => dt_s,
@@ -206,7 +208,14 @@ impl Solver {
                     .iter()
                     .map(|m| m.wave_speed_m_s())
                     .fold(0.0, f32::max);
-                (cfl * self.settings.dx / (c + self.max_speed_m_s)).min(max_dt_s)
+                let viscous = self
+                    .materials
+                    .iter()
+                    .map(|m| m.viscous_step_s(self.settings.dx))
+                    .fold(f32::INFINITY, f32::min);
+                (cfl * self.settings.dx / (c + self.max_speed_m_s))
+                    .min(max_dt_s)
+                    .min(viscous)
             }
         }
     }

@@ -127,9 +127,13 @@ where
             .iter()
             .all(|&m| m == material)
         {
-            materials[material as usize]
-                .model
-                .update_lanes_of(&step, &mut f, &mut vc, &mut frames)
+            materials[material as usize].model.update_lanes_of(
+                &step,
+                &mut f,
+                &mut vc,
+                &mut frames,
+                dt,
+            )
         } else {
             std::array::from_fn(|lane| {
                 let m = view.material.get(chunk + lane).copied().unwrap_or(material);
@@ -139,6 +143,7 @@ where
                     &mut f1,
                     &mut vc1,
                     &mut frame1,
+                    dt,
                 );
                 (f[lane], vc[lane], frames[lane]) = (f1[0], vc1[0], frame1[0]);
                 tau

@@ -25,6 +25,22 @@ impl SolverMaterial {
         let lame = self.model.lame();
         ((lame.lambda + 2.0 * lame.mu) / self.density_kg_m3).sqrt()
     }
+
+    /// The explicit step bound (s) of the material's in-cone viscosity eta at grid spacing `dx`
+    /// (m), `rho dx^2 / (2 eta)`, or infinity without one. Measured on the settling pile of
+    /// `tests/stability.rs` (dx = 5 mm, rho = 1600 kg/m^3, 8 particles per cell, dt = 1.1e-4
+    /// s): eta = 500 Pa s settles, 1000 Pa s jitters at 34 m/s, 1400 Pa s blows up, so the
+    /// instability sets in between `rho dx^2 / (0.36 eta)` and `rho dx^2 / (0.73 eta)`; this
+    /// bound keeps a factor 2.7 to 5.5 from it. (The B-spline gradient filters the grid's
+    /// shortest waves, so the limit is far above the finite-difference one, `rho dx^2 / (6 eta)`.)
+    pub fn viscous_step_s(&self, dx: f32) -> f32 {
+        match self.model {
+            Constitutive::DruckerPrager(dp) if dp.elastic_viscosity_pa_s > 0.0 => {
+                self.density_kg_m3 * dx * dx / (2.0 * dp.elastic_viscosity_pa_s)
+            }
+            _ => f32::INFINITY,
+        }
+    }
 }
 
 /// How the time step is chosen.
@@ -70,16 +86,18 @@ pub enum Transfer {
 pub enum CpicBand {
     /// Plain PIC: CPIC's velocity (ghosts at the nodes across a collider), no affine field, no
     /// kept deviation. Loses the band's velocity variation at every substep, so a plough's drag
-    /// grows with the substep count (+11 % for 3 x the substeps, docs/speed-vs-accuracy.md);
-    /// damps the ringing of bodies resting on sand. The default.
-    #[default]
+    /// grows with the substep count (+11 % for 3 x the substeps, docs/speed-vs-accuracy.md).
+    /// The default until 2026-12-04; for comparison.
     Pic,
     /// As the bulk ([`Transfer`]): the affine field CPIC's gather gives, and with AFLIP the
     /// particle's velocity deviation from the transferred grid over its compatible nodes
-    /// (momentum balanced with the bulk's). With AFLIP a plough's drag then moves by 0.2 % over
-    /// 9 x the substeps (with APIC still 12 % over 3 x), but a ball or a light plate resting on
-    /// sand rings
-    /// (docs/speed-vs-accuracy.md). For study.
+    /// (momentum balanced with the bulk's), relaxed over
+    /// [`SolverSettings::cpic_band_relaxation_s`]. With AFLIP a plough's drag then moves by
+    /// 0.2 % over 3 x the substeps (with APIC still 12 %). A ball or a light plate resting on
+    /// sand rings unless the sand is damped: the band's shorter relaxation and the sand's
+    /// in-cone viscosity (`DruckerPrager::elastic_viscosity_pa_s`) bring them to rest
+    /// (docs/speed-vs-accuracy.md, "The CPIC band"). The default.
+    #[default]
     Bulk,
 }
 
@@ -89,6 +107,32 @@ pub enum CpicBand {
 /// 2.0 % at 2 ms (1.3 % with the deposit's toe counted), 3.9 % at 1.34 ms, 8.5 % at 0.67 ms
 /// and 12 % at 1 s (almost FLIP).
 pub const DEFAULT_FLIP_RELAXATION_S: f32 = 2.0e-3;
+
+/// The default relaxation time (s) of a CPIC band particle's velocity deviation with
+/// [`CpicBand::Bulk`] ([`SolverSettings::cpic_band_relaxation_s`]). Chosen by measurement
+/// (docs/speed-vs-accuracy.md, "The CPIC band"): at the bulk's 2 ms a ball resting on sand
+/// rings at 0.05 m/s; at 0.5 ms it comes to rest, and a plough's drag still moves by under
+/// 0.3 % with 3 x the substeps.
+pub const DEFAULT_CPIC_BAND_RELAXATION_S: f32 = 5.0e-4;
+
+/// AFLIP's shares of a particle's deviation from the grid kept over one substep.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct KeptShares {
+    /// Away from colliders, `exp(-dt / flip_relaxation_s)`.
+    pub bulk: f32,
+    /// In the CPIC band with [`CpicBand::Bulk`], `exp(-dt / cpic_band_relaxation_s)`.
+    pub band: f32,
+}
+
+/// The share of a deviation kept over a substep of `dt` (s) for the relaxation time `tau_s`
+/// (s): `exp(-dt / tau)`, none for `tau_s = 0`.
+fn kept_share(dt: f32, tau_s: f32) -> f32 {
+    if tau_s > 0.0 {
+        libm::expf(-dt / tau_s)
+    } else {
+        0.0
+    }
+}
 
 /// Everything the solver needs besides particles and materials.
 #[derive(Clone, Debug)]
@@ -113,8 +157,21 @@ pub struct SolverSettings {
     pub flip_relaxation_s: f32,
     /// The transfer of particles near colliders.
     pub cpic_band: CpicBand,
+    /// With [`CpicBand::Bulk`] and AFLIP, the relaxation time `tau` (s, >= 0) of the velocity
+    /// deviation of a particle in the CPIC band: each substep keeps `exp(-dt / tau)` of it.
+    pub cpic_band_relaxation_s: f32,
     pub kernel: Kernel,
     /// Sleeping sand (blocks at rest left out of the substep), or none: every particle is
     /// stepped every substep.
     pub sleep: Option<SleepSettings>,
+}
+
+impl SolverSettings {
+    /// AFLIP's kept shares over a substep of `dt` (s).
+    pub(crate) fn kept_shares(&self, dt: f32) -> KeptShares {
+        KeptShares {
+            bulk: kept_share(dt, self.flip_relaxation_s),
+            band: kept_share(dt, self.cpic_band_relaxation_s),
+        }
+    }
 }

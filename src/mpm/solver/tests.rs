@@ -35,6 +35,7 @@ fn settings(gravity: Vector3<f32>, walls: Walls) -> SolverSettings {
         transfer: Transfer::Apic,
         flip_relaxation_s: 0.0,
         cpic_band: CpicBand::default(),
+        cpic_band_relaxation_s: DEFAULT_CPIC_BAND_RELAXATION_S,
         kernel: Kernel::QuadraticBspline,
         sleep: None,
     }
