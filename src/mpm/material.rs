@@ -61,7 +61,9 @@ pub struct DruckerPrager {
     pub volume_correction: bool,
     /// Viscosity eta (Pa s, >= 0) of the sand inside its cone: a particle whose return mapping
     /// changed nothing adds the Kelvin-Voigt stress `J eta (L + L^T)` (L the velocity gradient)
-    /// to its Kirchhoff stress. Damps elastic vibration; yielding sand does not see it.
+    /// to its Kirchhoff stress, unprojected (docs/physics.md, "Materials"). Damps elastic
+    /// vibration; yielding sand does not see it. Only [`Constitutive::update_lanes_of`], which
+    /// knows L, applies it.
     pub elastic_viscosity_pa_s: f32,
 }
 
@@ -103,7 +105,8 @@ impl Constitutive {
     /// Sand: `F <- U exp(eps) V^T` with `eps` from [`drucker_prager_return`]; `f` is left bit for
     /// bit unchanged when the return mapping changes nothing (inside the cone, no stored volume).
     /// The projected F always has positive singular values, so an inverted particle is restored.
-    /// With volume correction off the scalar is set to 0.
+    /// With volume correction off the scalar is set to 0. No viscous stress (no velocity
+    /// gradient here): [`Self::update_lanes_of`] adds it.
     pub fn update(
         &self,
         f: &mut Matrix3<f32>,
@@ -154,7 +157,9 @@ impl Constitutive {
             [qx, qy, qz, Wide::from_fn(|l| frames[l][3])],
         );
         let tau = match (self, out.in_cone) {
-            (Self::DruckerPrager(dp), Some(in_cone)) if dp.elastic_viscosity_pa_s > 0.0 => {
+            (Self::DruckerPrager(dp), Some(in_cone))
+                if dp.elastic_viscosity_pa_s > 0.0 && dt_s > 0.0 =>
+            {
                 // J eta (L + L^T) with L = step / dt, where the return mapping changed nothing.
                 let scale = in_cone.jacobian * Wide::splat(dp.elastic_viscosity_pa_s / dt_s);
                 let zero = Wide::splat(0.0);

@@ -186,7 +186,8 @@ pub struct SolverConfig {
     pub transfer: Transfer,
     /// With `transfer: aflip`, the relaxation time (s, >= 0) of a particle's deviation from the
     /// grid: each substep of dt keeps exp(-dt / tau) of its velocity's and its affine field's
-    /// rotation's, exp(-2 dt / tau) of its strain rate's (0 is APIC's update).
+    /// rotation's, exp(-2 dt / tau) of its strain rate's (0 is APIC's update away from
+    /// colliders; near one, `cpic_band_relaxation_s` applies).
     /// Default 2e-3 (`DEFAULT_FLIP_RELAXATION_S`).
     #[serde(default = "default_flip_relaxation")]
     pub flip_relaxation_s: f32,

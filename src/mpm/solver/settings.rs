@@ -153,7 +153,8 @@ pub struct SolverSettings {
     pub transfer: Transfer,
     /// Relaxation time `tau` (s, >= 0) of a particle's deviation from the grid under
     /// [`Transfer::Aflip`]: each substep keeps `exp(-dt / tau)` of its velocity's and its affine
-    /// field's rotation's, the square of that of its strain rate's (0 is APIC's update).
+    /// field's rotation's, the square of that of its strain rate's (0 is APIC's update away from
+    /// colliders; the CPIC band keeps its own, [`Self::cpic_band_relaxation_s`]).
     pub flip_relaxation_s: f32,
     /// The transfer of particles near colliders.
     pub cpic_band: CpicBand,
