@@ -32,7 +32,7 @@ fn box_thrown_into_sand_conserves_momentum() {
 /// CPIC band"): a plough's drag with 3 x the substeps. With the default band (transferred as
 /// the bulk, its deviation relaxed over 0.5 ms; the test sand damped in its cone) the drag does
 /// not move (measured 2026-12-04: 1.2354 and 1.2381 N, +0.22 %); with the band's plain PIC it
-/// grows (+10.8 % before the sand was damped): PIC loses the band's velocity variation at
+/// grows (1.6343 and 1.8097 N, +10.7 %): PIC loses the band's velocity variation at
 /// every substep, which made the answers near colliders follow the step count. Four ploughs,
 /// about 2 minutes on 2 cores.
 #[test]

@@ -161,7 +161,8 @@ impl Constitutive {
                 if dp.elastic_viscosity_pa_s > 0.0 && dt_s > 0.0 =>
             {
                 // J eta (L + L^T) with L = step / dt, where the return mapping changed nothing.
-                let scale = in_cone.jacobian * Wide::splat(dp.elastic_viscosity_pa_s / dt_s);
+                let jacobian = exp(in_cone.log_jacobian);
+                let scale = jacobian * Wide::splat(dp.elastic_viscosity_pa_s / dt_s);
                 let zero = Wide::splat(0.0);
                 mat3!(i, j => out.tau[i][j]
                     + Wide::select(in_cone.mask, scale * (step[i][j] + step[j][i]), zero))
@@ -226,7 +227,7 @@ impl Constitutive {
                 let tau = principal_to_tensor(&svd.u, hencky_stress(dp.lame, eps));
                 let in_cone = InCone {
                     mask: unchanged,
-                    jacobian: exp(eps[0] + eps[1] + eps[2]),
+                    log_jacobian: eps[0] + eps[1] + eps[2],
                 };
                 (f, tau, vc, Some(in_cone))
             }
@@ -349,8 +350,8 @@ struct LaneUpdate<L> {
 struct InCone<L> {
     /// All ones where the return mapping changed nothing.
     mask: L,
-    /// J = det F of the updated F.
-    jacobian: L,
+    /// ln J = tr(eps) of the updated F (the exponential only where the viscosity needs it).
+    log_jacobian: L,
 }
 
 /// Hencky strain `ln max(|sigma|, MIN_SINGULAR_VALUE)` of singular values.

@@ -130,16 +130,11 @@ pub struct Plough {
 /// (20 x 10 x 1.5 cm) settled for [`PLOUGH_SETTLE_S`], along the channel's middle at 0.3 m/s
 /// for 0.4 s, then standing for `rest_s`.
 pub fn plough(solver_settings: &str, rest_s: f64) -> Plough {
-    plough_with(solver_settings, SAND, rest_s)
-}
-
-/// [`plough`] in a given material.
-pub fn plough_with(solver_settings: &str, material: &str, rest_s: f64) -> Plough {
     let mut sand = sand_solver(
         [0.20, 0.10, 0.05],
         [0.0, 0.0, -9.81],
         solver_settings,
-        material,
+        SAND,
         "[{material: sand, box: {min_m: [0, 0, 0], max_m: [0.20, 0.10, 0.015]}}]",
     );
     let settle_s = PLOUGH_SETTLE_S;
