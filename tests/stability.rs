@@ -135,37 +135,33 @@ fn a_fixed_step_beyond_cfl_blows_up_and_is_reported_the_adaptive_step_is_stable(
     assert!(fastest < 0.5, "the pile must settle ({fastest} m/s)");
 }
 
-/// Case 5, viscous. The sand's in-cone viscosity eta bounds the explicit step by
-/// `rho dx^2 / (2 eta)` (`docs/physics.md`, "Time step"): a sand twenty times as viscous as the
-/// test sand (1000 Pa s: 2.0e-5 s at dx = 5 mm) shakes itself apart at the elastic CFL step,
-/// and the adaptive step, which takes the viscous bound, lets the same pile settle.
+/// Case 5, viscous. An explicit viscous stress is stable only below a step of order
+/// `rho dx^2 / eta`, but the sand's in-cone viscous stress is cut to what keeps the total stress
+/// in the cone (`docs/physics.md`, "Materials"), so it cannot outgrow the sand's friction. A sand
+/// 200 times as viscous as the test sand (1e4 Pa s) settles at the elastic CFL step, ten times
+/// the step at which the uncut stress blew up (measured 2026-12-04: 1400 Pa s blew up at this
+/// step, 1000 Pa s jittered at 34 m/s), and the adaptive step does not shrink for it.
 #[test]
-fn a_viscous_sand_settles_only_within_the_viscous_step_bound() {
-    let viscous = SAND.replace("elastic_viscosity_pa_s: 50", "elastic_viscosity_pa_s: 1000");
-    assert_ne!(viscous, SAND);
-    let mut adaptive = solver([0.0, 0.0, -9.81], "cfl: 0.4", &viscous, PILE);
-    let dt = adaptive.next_dt();
-    let bound = 1600.0 * 0.005f32.powi(2) / (2.0 * 1000.0);
-    assert!(
-        (dt - bound).abs() < 1e-3 * bound,
-        "step {dt} s, bound {bound} s"
+fn a_viscous_sand_settles_at_the_elastic_step_its_stress_kept_in_the_cone() {
+    let eta = 1e4;
+    let viscous = SAND.replace(
+        "elastic_viscosity_pa_s: 50",
+        &format!("elastic_viscosity_pa_s: {eta}"),
     );
-    // The elastic CFL step at CFL 0.4: 0.4 dx / 17 m/s = 1.17e-4 s.
+    assert_ne!(viscous, SAND);
+    let adaptive = solver([0.0, 0.0, -9.81], "cfl: 0.4", &viscous, PILE);
+    let undamped = SAND.replace("elastic_viscosity_pa_s: 50", "elastic_viscosity_pa_s: 0");
+    let elastic_dt = solver([0.0, 0.0, -9.81], "cfl: 0.4", &undamped, PILE).next_dt();
+    assert_eq!(adaptive.next_dt(), elastic_dt, "the viscosity must not bound the step");
+    // The elastic CFL step at CFL 0.4: 0.4 dx / 17 m/s = 1.17e-4 s; the uncut viscous stress's
+    // limit, rho dx^2 / (0.36 eta), would be 1.1e-5 s.
     let mut elastic_step = solver([0.0, 0.0, -9.81], "fixed_dt_s: 1.1e-4", &viscous, PILE);
     let end_s = 0.3;
-    adaptive.advance_to(end_s).unwrap();
-    let within = fastest_particle_m_s(&adaptive);
-    let beyond = elastic_step
-        .advance_to(end_s)
-        .map(|_| fastest_particle_m_s(&elastic_step));
-    println!(
-        "viscous pile at {end_s} s: fastest {within} m/s within the bound; beyond: {beyond:?}"
-    );
-    assert!(within < 0.5, "the pile must settle ({within} m/s)");
-    assert!(
-        !matches!(beyond, Ok(v) if v < 5.0),
-        "beyond the bound the pile settled too ({beyond:?} m/s): is the bound needed?"
-    );
+    elastic_step.advance_to(end_s).unwrap();
+    let fastest = fastest_particle_m_s(&elastic_step);
+    println!("pile of {eta} Pa s sand at {end_s} s, dt 1.1e-4 s: fastest particle {fastest} m/s");
+    // Measured: 0.091 m/s (0.091 at 50 and 1000 Pa s, 0.17 at 1e5).
+    assert!(fastest < 0.5, "the pile must settle ({fastest} m/s)");
 }
 
 /// The fastest particle's speed (m/s).

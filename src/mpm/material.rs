@@ -61,7 +61,8 @@ pub struct DruckerPrager {
     pub volume_correction: bool,
     /// Viscosity eta (Pa s, >= 0) of the sand inside its cone: a particle whose return mapping
     /// changed nothing adds the Kelvin-Voigt stress `J eta (L + L^T)` (L the velocity gradient)
-    /// to its Kirchhoff stress, unprojected (docs/physics.md, "Materials"). Damps elastic
+    /// to its Kirchhoff stress, cut where needed to keep the total inside the cone
+    /// (docs/physics.md, "Materials"). Damps elastic
     /// vibration; yielding sand does not see it. Only [`Constitutive::update_lanes_of`], which
     /// knows L, applies it.
     pub elastic_viscosity_pa_s: f32,
@@ -160,12 +161,8 @@ impl Constitutive {
             (Self::DruckerPrager(dp), Some(in_cone))
                 if dp.elastic_viscosity_pa_s > 0.0 && dt_s > 0.0 =>
             {
-                // J eta (L + L^T) with L = step / dt, where the return mapping changed nothing.
-                let jacobian = exp(in_cone.log_jacobian);
-                let scale = jacobian * Wide::splat(dp.elastic_viscosity_pa_s / dt_s);
-                let zero = Wide::splat(0.0);
-                mat3!(i, j => out.tau[i][j]
-                    + Wide::select(in_cone.mask, scale * (step[i][j] + step[j][i]), zero))
+                let viscous = viscous_stress_in_cone(dp, &out.tau, &step, dt_s, &in_cone);
+                mat3!(i, j => out.tau[i][j] + viscous[i][j])
             }
             _ => out.tau,
         };
@@ -352,6 +349,56 @@ struct InCone<L> {
     mask: L,
     /// ln J = tr(eps) of the updated F (the exponential only where the viscosity needs it).
     log_jacobian: L,
+}
+
+
+/// The in-cone viscous stress (Pa) of one substep: `s J eta (L + L^T)` with `L = step / dt`
+/// where the return mapping changed nothing, zero elsewhere. `s` is the largest share in
+/// [0, 1] that keeps the total stress `tau_e + s tau_v` inside the cone
+/// `f(tau) = |dev tau| + alpha tr(tau) <= 0`, so the viscosity never puts sand in tension nor
+/// beyond its friction (docs/physics.md, "Materials"). `f(tau_e + s tau_v)` is convex in `s`
+/// and `<= 0` at 0, so `s` is 1 or the first root of `|a + s b|^2 = alpha^2 (t_e + s t_v)^2`
+/// (`a`, `b` the deviators, `t` the traces): `s = -C / (B + sqrt(B^2 - A C))` with
+/// `A = |b|^2 - alpha^2 t_v^2`, `B = a:b - alpha^2 t_e t_v`, `C = |a|^2 - alpha^2 t_e^2 <= 0`.
+#[inline(always)]
+fn viscous_stress_in_cone<L: Lanes>(
+    dp: &DruckerPrager,
+    elastic: &Mat<L>,
+    step: &Mat<L>,
+    dt_s: f32,
+    in_cone: &InCone<L>,
+) -> Mat<L> {
+    let zero = L::splat(0.0);
+    let scale = exp(in_cone.log_jacobian) * L::splat(dp.elastic_viscosity_pa_s / dt_s);
+    let viscous = mat3!(i, j => scale * (step[i][j] + step[j][i]));
+    let (a, t_e) = deviator_and_trace(elastic);
+    let (b, t_v) = deviator_and_trace(&viscous);
+    let alpha_squared = L::splat(dp.alpha * dp.alpha);
+    let quadratic = contract(&b, &b) - alpha_squared * t_v * t_v;
+    let linear = contract(&a, &b) - alpha_squared * t_e * t_v;
+    let room = alpha_squared * t_e * t_e - contract(&a, &a);
+    let discriminant = linear * linear + quadratic * room;
+    let denominator = linear + discriminant.max(zero).sqrt();
+    // A root below 1 exists where the discriminant is >= 0 and -C / (B + sqrt(...)) < 1.
+    let crosses = zero.lt(discriminant).or(discriminant.eq(zero)).and(room.lt(denominator));
+    let share = L::select(crosses, (room / denominator).max(zero), L::splat(1.0));
+    let acting = L::select(in_cone.mask, share, zero);
+    mat3!(i, j => acting * viscous[i][j])
+}
+
+/// The deviator and the trace of a symmetric 3x3 tensor.
+#[inline(always)]
+fn deviator_and_trace<L: Lanes>(m: &Mat<L>) -> (Mat<L>, L) {
+    let trace = m[0][0] + m[1][1] + m[2][2];
+    let mean = trace / L::splat(3.0);
+    (mat3!(i, j => if i == j { m[i][j] - mean } else { m[i][j] }), trace)
+}
+
+/// `a : b`, the sum of the products of the entries.
+#[inline(always)]
+fn contract<L: Lanes>(a: &Mat<L>, b: &Mat<L>) -> L {
+    let rows = array3!(i => a[i][0] * b[i][0] + a[i][1] * b[i][1] + a[i][2] * b[i][2]);
+    rows[0] + rows[1] + rows[2]
 }
 
 /// Hencky strain `ln max(|sigma|, MIN_SINGULAR_VALUE)` of singular values.
@@ -634,6 +681,65 @@ mod tests {
             "must yield"
         );
         assert_eq!((damped, f_damped), (plain, f_plain));
+    }
+
+    /// However fast the in-cone sand deforms, its viscous stress is cut to what keeps the total
+    /// stress inside the cone: no tension, no shear beyond friction. Slow rates keep it whole.
+    #[test]
+    fn elastic_viscosity_keeps_the_stress_in_the_cone() {
+        let dt = 1e-4f32;
+        let Constitutive::DruckerPrager(dp) = sand(false) else {
+            unreachable!()
+        };
+        let viscous = Constitutive::DruckerPrager(DruckerPrager {
+            elastic_viscosity_pa_s: 1e4,
+            ..dp
+        });
+        // |dev tau| + alpha tr(tau): <= 0 inside the cone (Pa).
+        let outside = |tau: &Matrix3<f32>| {
+            let mean = tau.trace() / 3.0;
+            (tau - Matrix3::identity() * mean).norm() + dp.alpha * tau.trace()
+        };
+        let mut rng = SmallRng::seed_from_u64(19);
+        let (mut capped, mut whole) = (0, 0);
+        for i in 0..4_000 {
+            // Compressed sand sheared within its cone, deformed at up to 10 / s.
+            let strain = Vector3::new(-0.01, -0.01, -0.01) + random_strain(&mut rng, 0.004);
+            let q = rotation(&mut rng);
+            let f0 = q * Matrix3::from_diagonal(&strain.map(f32::exp)) * q.transpose();
+            let rate = [0.01, 1.0, 10.0][i % 3];
+            let l = gaussian(&mut rng) * rate;
+            let (mut f, mut vc, mut frame) = ([f0], [0.0], [COLD_START]);
+            let [tau] = viscous.update_lanes_of(&[l * dt], &mut f, &mut vc, &mut frame, dt);
+            let elastic = viscous.kirchhoff_stress(&f[0]);
+            if yield_value(&hencky_of(&f[0]), dp.lame, dp.alpha) > -1e-5 {
+                continue; // on the cone: yielded this step, no viscosity
+            }
+            let full = (l + l.transpose()) * (1e4 * f[0].determinant());
+            let added = tau - elastic;
+            let scale = elastic.norm().max(full.norm());
+            assert!(
+                outside(&tau) <= 2e-5 * scale,
+                "case {i}: total stress {tau} outside the cone by {} Pa",
+                outside(&tau)
+            );
+            if (added - full).norm() <= 1e-3 * full.norm() {
+                whole += 1;
+            } else {
+                capped += 1;
+                // Cut, never turned: the same direction, a smaller size.
+                let share = added.dot(&full) / full.norm_squared();
+                assert!(
+                    (0.0..1.0).contains(&share) && (added - full * share).norm() <= 1e-3 * full.norm(),
+                    "case {i}: viscous stress {added} is not a share of {full}"
+                );
+            }
+        }
+        assert!(capped > 100 && whole > 100, "capped {capped}, whole {whole}");
+    }
+
+    fn hencky_of(f: &Matrix3<f32>) -> Vector3<f32> {
+        svd3(f).sigma.map(|s| s.abs().ln())
     }
 
     #[test]

@@ -538,8 +538,9 @@ mod tests {
         // Per transfer: the stiff reference and the soft baseline, with AFLIP also the soft
         // sand at the stiff sand's step; CFL 0.2 (reference), 0.4 (baseline) and 0.8 with
         // AFLIP; soft sand at its own and at the stiff step with the CPIC band as the bulk,
-        // undamped and damped; five starts each with AFLIP, three with APIC (study 1).
-        assert_eq!(stiffness.settings.len(), 12);
+        // undamped and damped; the defaults at CFL 0.2 (reference), 0.4 and 0.8 and at E 0.5
+        // and 5 MPa; five starts each with AFLIP, three with APIC (study 1).
+        assert_eq!(stiffness.settings.len(), 17);
         assert!(stiffness
             .settings
             .iter()

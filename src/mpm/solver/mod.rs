@@ -197,8 +197,9 @@ impl Solver {
         &self.grid
     }
 
-    /// Time step the next substep will take (s): the CFL bound, `max_dt_s` and the viscous bound
-    /// of every material ([`SolverMaterial::viscous_step_s`]), or the fixed step.
+    /// Time step the next substep will take (s): the CFL bound and `max_dt_s`, or the fixed step.
+    /// (The sand's in-cone viscosity needs no bound of its own: its stress is cut to what keeps
+    /// the total in the cone, [`crate::mpm::material::DruckerPrager::elastic_viscosity_pa_s`].)
     pub fn next_dt(&self) -> f32 {
         match self.settings.time_step {
             TimeStep::Fixed { dt_s } => dt_s,
@@ -208,14 +209,7 @@ impl Solver {
                     .iter()
                     .map(|m| m.wave_speed_m_s())
                     .fold(0.0, f32::max);
-                let viscous = self
-                    .materials
-                    .iter()
-                    .map(|m| m.viscous_step_s(self.settings.dx))
-                    .fold(f32::INFINITY, f32::min);
-                (cfl * self.settings.dx / (c + self.max_speed_m_s))
-                    .min(max_dt_s)
-                    .min(viscous)
+                (cfl * self.settings.dx / (c + self.max_speed_m_s)).min(max_dt_s)
             }
         }
     }

@@ -25,22 +25,6 @@ impl SolverMaterial {
         let lame = self.model.lame();
         ((lame.lambda + 2.0 * lame.mu) / self.density_kg_m3).sqrt()
     }
-
-    /// The explicit step bound (s) of the material's in-cone viscosity eta at grid spacing `dx`
-    /// (m), `rho dx^2 / (2 eta)`, or infinity without one. Measured on the settling pile of
-    /// `tests/stability.rs` (dx = 5 mm, rho = 1600 kg/m^3, 8 particles per cell, dt = 1.1e-4
-    /// s): eta = 500 Pa s settles, 1000 Pa s jitters at 34 m/s, 1400 Pa s blows up, so the
-    /// instability sets in between `rho dx^2 / (0.36 eta)` and `rho dx^2 / (0.73 eta)`; this
-    /// bound keeps a factor 2.7 to 5.5 from it. (The B-spline gradient filters the grid's
-    /// shortest waves, so the limit is far above the finite-difference one, `rho dx^2 / (6 eta)`.)
-    pub fn viscous_step_s(&self, dx: f32) -> f32 {
-        match self.model {
-            Constitutive::DruckerPrager(dp) if dp.elastic_viscosity_pa_s > 0.0 => {
-                self.density_kg_m3 * dx * dx / (2.0 * dp.elastic_viscosity_pa_s)
-            }
-            _ => f32::INFINITY,
-        }
-    }
 }
 
 /// How the time step is chosen.
