@@ -351,15 +351,18 @@ struct InCone<L> {
     log_jacobian: L,
 }
 
-
 /// The in-cone viscous stress (Pa) of one substep: `s J eta (L + L^T)` with `L = step / dt`
-/// where the return mapping changed nothing, zero elsewhere. `s` is the largest share in
-/// [0, 1] that keeps the total stress `tau_e + s tau_v` inside the cone
-/// `f(tau) = |dev tau| + alpha tr(tau) <= 0`, so the viscosity never puts sand in tension nor
-/// beyond its friction (docs/physics.md, "Materials"). `f(tau_e + s tau_v)` is convex in `s`
-/// and `<= 0` at 0, so `s` is 1 or the first root of `|a + s b|^2 = alpha^2 (t_e + s t_v)^2`
-/// (`a`, `b` the deviators, `t` the traces): `s = -C / (B + sqrt(B^2 - A C))` with
-/// `A = |b|^2 - alpha^2 t_v^2`, `B = a:b - alpha^2 t_e t_v`, `C = |a|^2 - alpha^2 t_e^2 <= 0`.
+/// where the return mapping changed nothing and the sand is under pressure, zero elsewhere.
+/// `s` is the largest share in [0, 1] that keeps the total stress `tau_e + s tau_v` inside the
+/// cone `f(tau) = |dev tau| + alpha tr(tau) <= 0`, so the viscosity never puts sand in tension
+/// nor beyond its friction (docs/physics.md, "Materials"). `f(tau_e + s tau_v)` is convex in
+/// `s` and `<= 0` at 0, so `s` is 1 or the first positive root of
+/// `A s^2 + 2 B s - R = 0`, i.e. `|a + s b|^2 = alpha^2 (t_e + s t_v)^2` (`a`, `b` the
+/// deviators, `t` the traces; `A = |b|^2 - alpha^2 t_v^2`, `B = a:b - alpha^2 t_e t_v`, the
+/// room `R = alpha^2 t_e^2 - |a|^2 >= 0`): `R / (B + sqrt(B^2 + A R))` where `tau_v` points
+/// outwards (`B > 0`), `(sqrt(B^2 + A R) - B) / A` where it points inwards and `A > 0`, none
+/// otherwise; each form free of cancellation. `R`, and with it `B^2 + A R`, is clamped at 0:
+/// the strain-space mask can admit a state the f32 stress puts on the cone's far side of 0.
 #[inline(always)]
 fn viscous_stress_in_cone<L: Lanes>(
     dp: &DruckerPrager,
@@ -374,15 +377,24 @@ fn viscous_stress_in_cone<L: Lanes>(
     let (a, t_e) = deviator_and_trace(elastic);
     let (b, t_v) = deviator_and_trace(&viscous);
     let alpha_squared = L::splat(dp.alpha * dp.alpha);
-    let quadratic = contract(&b, &b) - alpha_squared * t_v * t_v;
-    let linear = contract(&a, &b) - alpha_squared * t_e * t_v;
-    let room = alpha_squared * t_e * t_e - contract(&a, &a);
-    let discriminant = linear * linear + quadratic * room;
-    let denominator = linear + discriminant.max(zero).sqrt();
-    // A root below 1 exists where the discriminant is >= 0 and -C / (B + sqrt(...)) < 1.
-    let crosses = zero.lt(discriminant).or(discriminant.eq(zero)).and(room.lt(denominator));
-    let share = L::select(crosses, (room / denominator).max(zero), L::splat(1.0));
-    let acting = L::select(in_cone.mask, share, zero);
+    let quadratic = contract(&b, &b) - alpha_squared * t_v * t_v; // A
+    let linear = contract(&a, &b) - alpha_squared * t_e * t_v; // B
+    let room = (alpha_squared * t_e * t_e - contract(&a, &a)).max(zero); // R
+    let root = (linear * linear + quadratic * room).max(zero).sqrt();
+    let outwards = zero.lt(linear);
+    let first_root = L::select(
+        outwards,
+        room / (linear + root),
+        (root - linear) / quadratic,
+    );
+    let crosses = L::select(
+        outwards,
+        room.lt(linear + root),
+        zero.lt(quadratic).and((root - linear).lt(quadratic)),
+    );
+    let share = L::select(crosses, first_root, L::splat(1.0));
+    // At the cone's apex (no pressure) the sand carries no stress, viscous or not.
+    let acting = L::select(in_cone.mask.and(t_e.lt(zero)), share, zero);
     mat3!(i, j => acting * viscous[i][j])
 }
 
@@ -391,7 +403,10 @@ fn viscous_stress_in_cone<L: Lanes>(
 fn deviator_and_trace<L: Lanes>(m: &Mat<L>) -> (Mat<L>, L) {
     let trace = m[0][0] + m[1][1] + m[2][2];
     let mean = trace / L::splat(3.0);
-    (mat3!(i, j => if i == j { m[i][j] - mean } else { m[i][j] }), trace)
+    (
+        mat3!(i, j => if i == j { m[i][j] - mean } else { m[i][j] }),
+        trace,
+    )
 }
 
 /// `a : b`, the sum of the products of the entries.
@@ -730,12 +745,124 @@ mod tests {
                 // Cut, never turned: the same direction, a smaller size.
                 let share = added.dot(&full) / full.norm_squared();
                 assert!(
-                    (0.0..1.0).contains(&share) && (added - full * share).norm() <= 1e-3 * full.norm(),
+                    (0.0..1.0).contains(&share)
+                        && (added - full * share).norm() <= 1e-3 * full.norm(),
                     "case {i}: viscous stress {added} is not a share of {full}"
                 );
             }
         }
-        assert!(capped > 100 && whole > 100, "capped {capped}, whole {whole}");
+        assert!(
+            capped > 100 && whole > 100,
+            "capped {capped}, whole {whole}"
+        );
+    }
+
+    /// The share of the viscous stress kept, in the cases where rounding or the cone's apex
+    /// could mislead its closed form: states on the cone (and a rounding outside it), pointing
+    /// out, in, and across; no pressure; radial unloading through the apex; a masked lane.
+    #[test]
+    fn viscous_share_at_the_cone_and_its_apex() {
+        let Constitutive::DruckerPrager(dp) = sand(false) else {
+            unreachable!()
+        };
+        let dp = DruckerPrager {
+            elastic_viscosity_pa_s: 1e3,
+            ..dp
+        };
+        let dt = 1e-4f32;
+        let outside = |tau: &Matrix3<f32>| {
+            let mean = tau.trace() / 3.0;
+            (tau - Matrix3::identity() * mean).norm() + dp.alpha * tau.trace()
+        };
+        // The viscous stress kept for elastic stress `tau_e` and full viscous stress `tau_v`.
+        let kept = |tau_e: Matrix3<f32>, tau_v: Matrix3<f32>, in_mask: bool| {
+            let wide = |m: Matrix3<f32>| mat3!(i, j => Wide::<1>::splat(m[(i, j)]));
+            let zero = Wide::<1>::splat(0.0);
+            let in_cone = InCone {
+                mask: if in_mask {
+                    zero.eq(zero)
+                } else {
+                    zero.lt(zero)
+                },
+                log_jacobian: zero,
+            };
+            let step = tau_v * (dt / (2.0 * dp.elastic_viscosity_pa_s));
+            let added = viscous_stress_in_cone(&dp, &wide(tau_e), &wide(step), dt, &in_cone);
+            Matrix3::from_fn(|i, j| added[i][j].lane(0))
+        };
+        let pressure = 1e3f32;
+        let shear = Matrix3::from_diagonal(&Vector3::new(1.0, -1.0, 0.0)) / 2f32.sqrt();
+        let on_cone = Matrix3::identity() * -pressure + shear * (3.0 * dp.alpha * pressure);
+        let just_outside =
+            Matrix3::identity() * -pressure + shear * (3.0 * dp.alpha * pressure * (1.0 + 1e-6));
+        let inside = Matrix3::identity() * -pressure + shear * (1.5 * dp.alpha * pressure);
+        let cases = [
+            (
+                "on the cone, out along the shear",
+                on_cone,
+                shear * 100.0,
+                0.0,
+            ),
+            (
+                "rounding outside, out along the shear",
+                just_outside,
+                shear * 100.0,
+                0.0,
+            ),
+            (
+                "on the cone, compressed a little",
+                on_cone,
+                Matrix3::identity() * -100.0,
+                1.0,
+            ),
+            (
+                "on the cone, compressed much",
+                on_cone,
+                Matrix3::identity() * -1e5,
+                1.0,
+            ),
+            (
+                "rounding outside, compressed",
+                just_outside,
+                Matrix3::identity() * -100.0,
+                1.0,
+            ),
+            // |1 - 3 s| |d| <= 3 alpha p: across the axis and out on the far side at s = 2/3.
+            (
+                "on the cone, sheared across",
+                on_cone,
+                shear * (-9.0 * dp.alpha * pressure),
+                2.0 / 3.0,
+            ),
+            (
+                "no pressure, pulled apart",
+                Matrix3::zeros(),
+                Matrix3::identity() * 100.0,
+                0.0,
+            ),
+            ("unloading through the apex", inside, inside * -2.0, 0.5),
+        ];
+        for (name, tau_e, tau_v, expected) in cases {
+            let added = kept(tau_e, tau_v, true);
+            let share = added.dot(&tau_v) / tau_v.norm_squared();
+            let scale = tau_e.norm().max(tau_v.norm());
+            assert!(
+                (share - expected).abs() < 1e-4 && (added - tau_v * share).norm() < 1e-5 * scale,
+                "{name}: kept {added} of {tau_v}, share {share}, expected {expected}"
+            );
+            assert!(
+                outside(&(tau_e + added)) <= 1e-5 * scale.max(outside(&tau_e)),
+                "{name}: total {} outside the cone by {} Pa",
+                tau_e + added,
+                outside(&(tau_e + added))
+            );
+        }
+        let masked = kept(inside, Matrix3::identity() * -100.0, false);
+        assert_eq!(
+            masked,
+            Matrix3::zeros(),
+            "a yielding lane keeps no viscosity"
+        );
     }
 
     fn hencky_of(f: &Matrix3<f32>) -> Vector3<f32> {
