@@ -137,10 +137,10 @@ fn a_fixed_step_beyond_cfl_blows_up_and_is_reported_the_adaptive_step_is_stable(
 
 /// Case 5, viscous. An explicit viscous stress is stable only below a step of order
 /// `rho dx^2 / eta`, but the sand's in-cone viscous stress is cut to what keeps the total stress
-/// in the cone (`docs/physics.md`, "Materials"), so it cannot outgrow the sand's friction. A sand
+/// in the cone (`docs/physics.md`, "Materials"): no tension, no shear beyond friction. A sand
 /// 200 times as viscous as the test sand (1e4 Pa s) settles at the elastic CFL step, ten times
-/// the step at which the uncut stress blew up (measured 2026-12-04: 1400 Pa s blew up at this
-/// step, 1000 Pa s jittered at 34 m/s), and the adaptive step does not shrink for it.
+/// the uncut stress's limit at that viscosity (uncut, measured 2026-12-04 at this step: 1400
+/// Pa s blew up, 1000 Pa s jittered at 34 m/s), and the adaptive step does not shrink for it.
 #[test]
 fn a_viscous_sand_settles_at_the_elastic_step_its_stress_kept_in_the_cone() {
     let eta = 1e4;

@@ -62,9 +62,8 @@ pub struct DruckerPrager {
     /// Viscosity eta (Pa s, >= 0) of the sand inside its cone: a particle whose return mapping
     /// changed nothing adds the Kelvin-Voigt stress `J eta (L + L^T)` (L the velocity gradient)
     /// to its Kirchhoff stress, cut where needed to keep the total inside the cone
-    /// (docs/physics.md, "Materials"). Damps elastic
-    /// vibration; yielding sand does not see it. Only [`Constitutive::update_lanes_of`], which
-    /// knows L, applies it.
+    /// (docs/physics.md, "Materials"). Damps elastic vibration; yielding sand does not see it.
+    /// Only [`Constitutive::update_lanes_of`], which knows L, applies it.
     pub elastic_viscosity_pa_s: f32,
 }
 
@@ -497,6 +496,12 @@ mod tests {
         eps.add_scalar(-tr / 3.0).norm() + (3.0 * l.lambda + 2.0 * l.mu) / (2.0 * l.mu) * tr * alpha
     }
 
+    /// The cone function in Kirchhoff stress, `|dev tau| + alpha tr(tau)` (Pa): <= 0 inside.
+    fn stress_cone_value(tau: &Matrix3<f32>, alpha: f32) -> f32 {
+        let mean = tau.trace() / 3.0;
+        (tau - Matrix3::identity() * mean).norm() + alpha * tau.trace()
+    }
+
     #[test]
     fn lame_from_young_poisson() {
         let l = Lame::from_young_poisson(1e6, 0.3);
@@ -710,11 +715,7 @@ mod tests {
             elastic_viscosity_pa_s: 1e4,
             ..dp
         });
-        // |dev tau| + alpha tr(tau): <= 0 inside the cone (Pa).
-        let outside = |tau: &Matrix3<f32>| {
-            let mean = tau.trace() / 3.0;
-            (tau - Matrix3::identity() * mean).norm() + dp.alpha * tau.trace()
-        };
+        let outside = |tau: &Matrix3<f32>| stress_cone_value(tau, dp.alpha);
         let mut rng = SmallRng::seed_from_u64(19);
         let (mut capped, mut whole) = (0, 0);
         for i in 0..4_000 {
@@ -770,10 +771,7 @@ mod tests {
             ..dp
         };
         let dt = 1e-4f32;
-        let outside = |tau: &Matrix3<f32>| {
-            let mean = tau.trace() / 3.0;
-            (tau - Matrix3::identity() * mean).norm() + dp.alpha * tau.trace()
-        };
+        let outside = |tau: &Matrix3<f32>| stress_cone_value(tau, dp.alpha);
         // The viscous stress kept for elastic stress `tau_e` and full viscous stress `tau_v`.
         let kept = |tau_e: Matrix3<f32>, tau_v: Matrix3<f32>, in_mask: bool| {
             let wide = |m: Matrix3<f32>| mat3!(i, j => Wide::<1>::splat(m[(i, j)]));
