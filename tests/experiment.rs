@@ -39,6 +39,10 @@ const BED_X_M: (f64, f64) = (-0.12, 0.8);
 const BED_HALF_WIDTH_M: f64 = 0.12;
 /// Measured gait cycles.
 const CYCLES: usize = 2;
+/// Largest tilt of the upright C-leg robot (deg). At this grid, five starts 2 mm apart tilt
+/// 25 +- 5 deg at most over the run (18 to 33; this test's start 33), and the 2 Hz sweeps
+/// 26 to 43 deg; a robot that tips over ends beyond 90 (137 to 175 in docs/experiment.md).
+const MAX_C_LEG_TILT_DEG: f64 = 60.0;
 
 /// Runs the C-leg/reversed-leg sweep on `model` into `out` and returns results.json.
 fn c_versus_reversed(model: &str, out: &Path) -> Value {
@@ -155,7 +159,7 @@ fn assert_c_legs_win(results: &Value, model: &str) {
         "per cycle too"
     );
     assert!(
-        number(&c, "max_tilt_deg") < 45.0,
+        number(&c, "max_tilt_deg") < MAX_C_LEG_TILT_DEG,
         "the C-leg robot must not tip over"
     );
     let end = c["final_position_m"].as_array().unwrap();

@@ -10,12 +10,14 @@
 
 pub mod surface;
 
-use nalgebra::Vector3;
-use rapier3d::glamx::Vec3;
+use nalgebra::{Matrix3, Vector3};
+use rapier3d::glamx::{Mat3, Vec3};
 use rapier3d::prelude::{ColliderSet, Pose, RigidBodyHandle, RigidBodySet};
 use serde::{Deserialize, Serialize};
 
-use crate::mpm::cpic::{ColliderImpulse, ColliderMotion, ColourBlock, NodeColour, MAX_COLLIDERS};
+use crate::mpm::cpic::{
+    ColliderImpulse, ColliderMotion, ColourBlock, NodeColour, YieldInertia, MAX_COLLIDERS,
+};
 use crate::mpm::grid::{node_in_block, BLOCK_EDGE};
 use crate::mpm::sleep::WakeZone;
 use crate::mpm::{SimError, Solver};
@@ -51,6 +53,19 @@ pub enum CouplingMethod {
     GridBoundary,
 }
 
+/// What a robot's leg yields to the sand with within a substep (CPIC's light-body yield,
+/// `docs/physics.md` CPIC step 7).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LegYield {
+    /// Its own mass, as a free body: stable, but a leg carrying a load `F` creeps into the sand
+    /// at about `F dt / m_leg`, so sinkage and speed follow the step.
+    Leg,
+    /// The whole robot's inertia, all links as one rigid body: no creep, but a leg pushes the
+    /// sand as if its motor could hold any torque, and straight legs blow up at landing.
+    Robot,
+}
+
 /// One rigid collider as the sand sees it.
 #[derive(Clone, Debug)]
 pub struct SandCollider {
@@ -82,6 +97,9 @@ pub struct Coupling {
     /// Colliders with a mode other than `None`, in colour-bit order.
     colliders: Vec<SandCollider>,
     method: CouplingMethod,
+    /// Bodies that joints and motors hold together within a substep (a robot's links): a
+    /// collider on one of them yields to the sand with the whole group's inertia.
+    rigid_groups: Vec<Vec<RigidBodyHandle>>,
 }
 
 /// A collider at the start of a substep.
@@ -114,7 +132,17 @@ impl Coupling {
         Ok(Coupling {
             colliders,
             method: CouplingMethod::Cpic,
+            rigid_groups: Vec::new(),
         })
+    }
+
+    /// The same colliders, with `bodies` held together within a substep: a two-way collider on
+    /// any of them yields to the sand as one rigid body with all their mass and inertia, as a
+    /// robot's leg does whose motor holds it to the body (`docs/physics.md`, CPIC step 7). A
+    /// body in no group yields alone.
+    pub fn with_rigid_group(mut self, bodies: Vec<RigidBodyHandle>) -> Self {
+        self.rigid_groups.push(bodies);
+        self
     }
 
     /// The same colliders acting by another method.
@@ -194,21 +222,43 @@ impl Coupling {
                     angular_rad_s: to_na(rb.angvel()),
                     centre_m: to_na(rb.center_of_mass()),
                     friction: c.friction,
-                    mass_kg: if yields { rb.mass() } else { f32::INFINITY },
-                    inertia_kg_m2: if yields {
-                        rb.mass_properties()
-                            .local_mprops
-                            .principal_inertia()
-                            .min_element()
-                    } else {
-                        f32::INFINITY
-                    },
+                    yield_inertia: yields.then(|| self.yield_inertia(c.body, bodies)),
                 }
             })
             .collect();
         let impulses = solver.finish_substep(dt, &motions)?;
         self.hand_back(&impulses, bodies, dt);
         Ok(impulses)
+    }
+
+    /// The inertia that yields with `body` within a substep, about its centre of mass: its
+    /// group's, as one rigid body, or its own (isotropic, its smallest principal moment, which
+    /// errs on the yielding side).
+    fn yield_inertia(&self, body: RigidBodyHandle, bodies: &RigidBodySet) -> YieldInertia {
+        let rb = &bodies[body];
+        let Some(group) = self.rigid_groups.iter().find(|g| g.contains(&body)) else {
+            let smallest = rb
+                .mass_properties()
+                .local_mprops
+                .principal_inertia()
+                .min_element();
+            return YieldInertia::free_body(rb.mass() as f64, smallest as f64);
+        };
+        let parts = group.iter().filter_map(|&h| bodies.get(h)).map(|member| {
+            let rotation = to_na_matrix(Mat3::from_quat(*member.rotation()));
+            let local = to_na_matrix(
+                member
+                    .mass_properties()
+                    .local_mprops
+                    .reconstruct_inertia_matrix(),
+            );
+            (
+                member.mass() as f64,
+                to_na(member.center_of_mass()).cast::<f64>(),
+                rotation * local * rotation.transpose(),
+            )
+        });
+        YieldInertia::of_parts(parts, &to_na(rb.center_of_mass()).cast::<f64>())
     }
 
     /// Applies the two-way colliders' impulses as forces and torques over `dt`, summed per body.
@@ -408,6 +458,11 @@ fn world_aabb(pose: &Pose, (min, max): ([f32; 3], [f32; 3])) -> (Vector3<f32>, V
         }
     }
     (lo, hi)
+}
+
+/// A rapier 3x3 matrix in f64 nalgebra.
+fn to_na_matrix(m: Mat3) -> Matrix3<f64> {
+    Matrix3::from_fn(|r, c| m.col(c)[r] as f64)
 }
 
 fn to_na(v: Vec3) -> Vector3<f32> {

@@ -45,57 +45,125 @@ pub struct ColliderMotion {
     pub centre_m: Vector3<f32>,
     /// Coulomb friction coefficient between sand and the collider (dimensionless).
     pub friction: f32,
-    /// Mass that yields to the sand within a substep (kg): the body's own mass for two-way
-    /// colliders, `f32::INFINITY` for colliders that do not yield (one-way, kinematic).
-    pub mass_kg: f32,
-    /// Rotational inertia that yields to the sand (kg m^2): the body's smallest principal
-    /// moment about its centre of mass, `f32::INFINITY` for colliders that do not yield
-    /// (either infinite mass or infinite inertia means no yield at all).
-    pub inertia_kg_m2: f32,
+    /// The inertia that yields to the sand within a substep, about `centre_m`; `None` for
+    /// colliders that do not yield (one-way, kinematic).
+    pub yield_inertia: Option<YieldInertia>,
+}
+
+/// Rigid inertia that moves with a collider within a substep, about the collider's centre: its
+/// body's own (free bodies), or that of all the bodies its joints and motors hold it to (a
+/// robot's leg moves with the whole robot: `crate::coupling::Coupling::with_rigid_group`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct YieldInertia {
+    /// Mass (kg).
+    pub mass_kg: f64,
+    /// First moment `m (c - centre)` of the mass about the collider's centre (kg m); zero when
+    /// the centre is the centre of mass.
+    pub first_moment_kg_m: Vector3<f64>,
+    /// Inertia tensor about the collider's centre (kg m^2).
+    pub inertia_kg_m2: Matrix3<f64>,
+}
+
+impl YieldInertia {
+    /// A free body about its own centre of mass, isotropic with its smallest principal moment
+    /// `inertia_kg_m2` (which errs on the yielding side).
+    pub fn free_body(mass_kg: f64, inertia_kg_m2: f64) -> Self {
+        YieldInertia {
+            mass_kg,
+            first_moment_kg_m: Vector3::zeros(),
+            inertia_kg_m2: Matrix3::identity() * inertia_kg_m2,
+        }
+    }
+
+    /// Parts held together as one rigid body, each `(mass (kg), centre of mass (m), inertia
+    /// tensor about its centre of mass in world axes (kg m^2))`, about `centre` (m): the masses
+    /// and first moments add, the inertias by the parallel-axis theorem.
+    pub fn of_parts(
+        parts: impl IntoIterator<Item = (f64, Vector3<f64>, Matrix3<f64>)>,
+        centre: &Vector3<f64>,
+    ) -> Self {
+        let mut total = YieldInertia {
+            mass_kg: 0.0,
+            first_moment_kg_m: Vector3::zeros(),
+            inertia_kg_m2: Matrix3::zeros(),
+        };
+        for (mass, com, inertia) in parts {
+            let offset = com - centre;
+            total.mass_kg += mass;
+            total.first_moment_kg_m += offset * mass;
+            total.inertia_kg_m2 += inertia
+                + (Matrix3::identity() * offset.norm_squared() - offset * offset.transpose())
+                    * mass;
+        }
+        total
+    }
+
+    /// Spatial inertia (6x6): momentum and angular momentum about the centre of a rigid motion
+    /// `(v, w)` given at the centre.
+    fn spatial(&self) -> Matrix6<f64> {
+        spatial_inertia(self.mass_kg, &self.first_moment_kg_m, &self.inertia_kg_m2)
+    }
+
+    /// Usable: positive and finite.
+    fn is_valid(&self) -> bool {
+        self.mass_kg.is_finite()
+            && self.mass_kg > 0.0
+            && self.inertia_kg_m2.iter().all(|v| v.is_finite())
+            && self.inertia_kg_m2.trace() > 0.0
+    }
+}
+
+/// `[[m 1, -[S]x], [[S]x, I]]` for mass `m`, first moment `S` and inertia tensor `I` about one
+/// point: the momentum and angular momentum about that point of a rigid motion given there.
+fn spatial_inertia(mass: f64, first_moment: &Vector3<f64>, inertia: &Matrix3<f64>) -> Matrix6<f64> {
+    let s_cross = first_moment.cross_matrix();
+    let mut m = Matrix6::<f64>::zeros();
+    m.fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&(Matrix3::identity() * mass));
+    m.fixed_view_mut::<3, 3>(0, 3).copy_from(&-s_cross);
+    m.fixed_view_mut::<3, 3>(3, 0).copy_from(&s_cross);
+    m.fixed_view_mut::<3, 3>(3, 3).copy_from(inertia);
+    m
 }
 
 impl ColliderMotion {
-    /// The motion G2P uses after P2G: a body of mass `m_b` and inertia `I_b` meets, at
-    /// incompatible nodes (`p2g`), sand of mass `M_s`, first moment `S = sum w m r`, inertia
-    /// tensor `I_s = sum w m (|r|^2 1 - r r^T)`, momentum `P_s` and angular momentum `L_s` (all
-    /// about the body's centre). Body and sand are given the one rigid motion `(v*, w*)` that
-    /// keeps their total momentum and angular momentum (a perfectly inelastic exchange):
+    /// The motion G2P uses after P2G. The collider, with the inertia that yields with it
+    /// (spatial inertia `M_b` about its centre), meets at incompatible nodes (`p2g`) sand of
+    /// mass `M_s`, first moment `S = sum w m r`, inertia tensor `I_s = sum w m (|r|^2 1 - r
+    /// r^T)`, momentum `P_s` and angular momentum `L_s` (all about the centre). Body and sand
+    /// are given the one rigid motion `(v*, w*)` that keeps their momentum and angular momentum
+    /// (a perfectly inelastic exchange; `(v, w)` the collider's motion):
     ///
     /// ```text
-    /// (m_b + M_s) v* - [S]x w*       = m_b v_b + P_s
-    /// [S]x v*        + (I_b + I_s) w* = I_b w_b + L_s
+    /// (M_b + M_sand) (v*, w*) = M_b (v, w) + (P_s, L_s),   M_sand = [[M_s 1, -[S]x], [[S]x, I_s]]
     /// ```
     ///
-    /// The ghost velocities then move the sand with that motion, and the impulse the body
-    /// receives changes its motion by about `(v* - v_b, w* - w_b)`: never more than the relative
-    /// motion, so a light body (a 2 g leg) meeting much more sand stays stable in this explicit
-    /// exchange. Heavy bodies keep their own motion. `I_b` is isotropic (the body's smallest
-    /// principal moment), which errs on the yielding side.
+    /// (`M_b (v, w)` is what the inertia would carry moving with the collider; only the change
+    /// `(v* - v, w* - w)` matters, so the yielding inertia need not move with the collider, as a
+    /// robot does not move with its leg.) The ghost velocities then move the sand with that
+    /// motion, and the impulse the body receives changes its motion by about the difference:
+    /// never more than the relative motion, so a light body (a 2 g plate) meeting much more
+    /// sand stays stable in this explicit exchange. Heavy bodies keep their own motion. The
+    /// exchange bounds the force the sand can exert over a substep `dt` by about
+    /// `M_b v_rel / dt`: carrying a load `F` takes a relative motion `F dt / M_b`, a creep that
+    /// grows with the step (`docs/physics.md`, CPIC step 7).
     pub fn yielded(&self, p2g: Option<&ColliderImpulse>) -> ColliderMotion {
-        let yields = self.mass_kg.is_finite()
-            && self.mass_kg > 0.0
-            && self.inertia_kg_m2.is_finite()
-            && self.inertia_kg_m2 > 0.0;
-        let Some(p2g) = p2g.filter(|p| yields && p.sand_mass_kg > 0.0) else {
+        let Some(body) = self.yield_inertia.filter(YieldInertia::is_valid) else {
             return *self;
         };
-        let (m_b, i_b) = (self.mass_kg as f64, self.inertia_kg_m2 as f64);
-        let s_cross = p2g.sand_first_moment.cross_matrix();
-        let mut system = Matrix6::<f64>::zeros();
-        system
-            .fixed_view_mut::<3, 3>(0, 0)
-            .copy_from(&(Matrix3::identity() * (m_b + p2g.sand_mass_kg)));
-        system.fixed_view_mut::<3, 3>(0, 3).copy_from(&-s_cross);
-        system.fixed_view_mut::<3, 3>(3, 0).copy_from(&s_cross);
-        system
-            .fixed_view_mut::<3, 3>(3, 3)
-            .copy_from(&(Matrix3::identity() * i_b + p2g.sand_inertia));
-        let momentum = self.linear_m_s.cast::<f64>() * m_b + p2g.linear_n_s;
-        let angular = self.angular_rad_s.cast::<f64>() * i_b + p2g.angular_n_m_s;
-        let rhs = Vector6::new(
-            momentum.x, momentum.y, momentum.z, angular.x, angular.y, angular.z,
+        let Some(p2g) = p2g.filter(|p| p.sand_mass_kg > 0.0) else {
+            return *self;
+        };
+        let (v, w) = (
+            self.linear_m_s.cast::<f64>(),
+            self.angular_rad_s.cast::<f64>(),
         );
-        // The system is a rigid-body mass matrix: symmetric positive definite.
+        let system = body.spatial()
+            + spatial_inertia(p2g.sand_mass_kg, &p2g.sand_first_moment, &p2g.sand_inertia);
+        let carried = body.spatial() * Vector6::new(v.x, v.y, v.z, w.x, w.y, w.z);
+        let (lin, ang) = (p2g.linear_n_s, p2g.angular_n_m_s);
+        let rhs = carried + Vector6::new(lin.x, lin.y, lin.z, ang.x, ang.y, ang.z);
+        // The system is a sum of rigid-body spatial inertias: symmetric positive definite.
         let Some(motion) = system.cholesky().map(|c| c.solve(&rhs)) else {
             return *self;
         };
@@ -343,8 +411,7 @@ mod tests {
             angular_rad_s: Vector3::zeros(),
             centre_m: Vector3::zeros(),
             friction: 0.3,
-            mass_kg: 0.002,
-            inertia_kg_m2: 2e-8,
+            yield_inertia: Some(YieldInertia::free_body(0.002, 2e-8)),
         };
         // 20 g of sand, 1 cm above the centre, moving at v.
         let (m, r) = (0.02f64, Vector3::new(0.0, 0.0, 0.01f64));
@@ -377,10 +444,87 @@ mod tests {
         assert!(y.linear_m_s.norm() < v.norm(), "the light body slows down");
         // A body that does not yield keeps its motion.
         let heavy = ColliderMotion {
-            mass_kg: f32::INFINITY,
+            yield_inertia: None,
             ..body
         };
         assert_eq!(heavy.yielded(Some(&sand)), heavy);
+    }
+
+    /// Two 1 kg parts 0.2 m apart along x: about the first one's centre the pair has 2 kg, a
+    /// first moment of 0.2 kg m along x and, beyond the parts' own inertia, 0.04 kg m^2 about y
+    /// and z from the second part, none about x.
+    #[test]
+    fn parts_add_by_the_parallel_axis_theorem() {
+        let own = Matrix3::from_diagonal(&Vector3::new(1e-3, 2e-3, 3e-3));
+        let (a, b) = (Vector3::new(0.1, 0.0, 0.0), Vector3::new(0.3, 0.0, 0.0));
+        let pair = YieldInertia::of_parts([(1.0, a, own), (1.0, b, own)], &a);
+        assert_eq!(pair.mass_kg, 2.0);
+        assert!((pair.first_moment_kg_m - Vector3::new(0.2, 0.0, 0.0)).norm() < 1e-12);
+        let expected = own * 2.0 + Matrix3::from_diagonal(&Vector3::new(0.0, 0.04, 0.04));
+        assert!(
+            (pair.inertia_kg_m2 - expected).norm() < 1e-12,
+            "{}",
+            pair.inertia_kg_m2
+        );
+    }
+
+    /// A leg held by its motor to an 85 g robot whose centre of mass sits 3 cm above the leg's
+    /// centre meets 20 g of sand at rest: body and sand keep their momentum and angular momentum
+    /// about the leg's centre, and the leg keeps most of its motion, where alone (2 g) it would
+    /// nearly stop: with its own mass it could carry only a 40th of the load per substep.
+    #[test]
+    fn a_leg_yields_with_the_robot_it_is_held_to() {
+        let v = Vector3::new(0.05, 0.0, -0.3f32);
+        let (m_r, e) = (0.085f64, Vector3::new(0.0, 0.0, 0.03f64));
+        let centred = Matrix3::from_diagonal(&Vector3::new(1e-4, 2e-4, 2e-4));
+        let robot = YieldInertia {
+            mass_kg: m_r,
+            first_moment_kg_m: e * m_r,
+            inertia_kg_m2: centred
+                + (Matrix3::identity() * e.norm_squared() - e * e.transpose()) * m_r,
+        };
+        let leg = ColliderMotion {
+            linear_m_s: v,
+            angular_rad_s: Vector3::new(0.0, 2.0, 0.0),
+            centre_m: Vector3::zeros(),
+            friction: 0.3,
+            yield_inertia: Some(robot),
+        };
+        let (m, r) = (0.02f64, Vector3::new(0.004, 0.0, -0.01f64));
+        let sand = ColliderImpulse {
+            linear_n_s: Vector3::zeros(),
+            angular_n_m_s: Vector3::zeros(),
+            sand_mass_kg: m,
+            sand_first_moment: r * m,
+            sand_inertia: (Matrix3::identity() * r.norm_squared() - r * r.transpose()) * m,
+        };
+        let motion = |c: &ColliderMotion| {
+            let (l, a) = (c.linear_m_s.cast::<f64>(), c.angular_rad_s.cast::<f64>());
+            Vector6::new(l.x, l.y, l.z, a.x, a.y, a.z)
+        };
+        let y = leg.yielded(Some(&sand));
+        let sand_spatial = spatial_inertia(m, &sand.sand_first_moment, &sand.sand_inertia);
+        let before = robot.spatial() * motion(&leg);
+        let after = robot.spatial() * motion(&y) + sand_spatial * motion(&y);
+        // The changed motion is stored in f32.
+        assert!(
+            (after - before).norm() < 1e-6 * before.norm(),
+            "{after} vs {before}"
+        );
+        // The leg's velocity where it meets the sand.
+        let contact = r.cast::<f32>();
+        let pushing = leg.velocity_at(&contact).norm();
+        assert!(
+            y.velocity_at(&contact).norm() > 0.75 * pushing,
+            "held to the robot the leg keeps its motion: {}",
+            y.velocity_at(&contact)
+        );
+        let alone = ColliderMotion {
+            yield_inertia: Some(YieldInertia::free_body(0.002, 2e-8)),
+            ..leg
+        };
+        let stopped = alone.yielded(Some(&sand)).velocity_at(&contact);
+        assert!(stopped.norm() < 0.15 * pushing, "alone it stops: {stopped}");
     }
 
     #[test]

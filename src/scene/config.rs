@@ -417,6 +417,10 @@ pub struct CouplingConfig {
     /// Coulomb friction coefficient sand-robot (-), legs and body. Default 0.4.
     #[serde(default = "default_sand_friction")]
     pub friction: f32,
+    /// What a leg yields to the sand with within a substep: `leg` (its own mass) or `robot`
+    /// (the whole robot as one rigid body). Default `leg`.
+    #[serde(default = "default_legs_yield_with")]
+    pub legs_yield_with: crate::coupling::LegYield,
 }
 
 fn default_method() -> crate::coupling::CouplingMethod {
@@ -428,6 +432,9 @@ fn default_mode() -> crate::coupling::CouplingMode {
 fn default_sand_friction() -> f32 {
     0.4
 }
+fn default_legs_yield_with() -> crate::coupling::LegYield {
+    crate::coupling::LegYield::Leg
+}
 
 impl Default for CouplingConfig {
     fn default() -> Self {
@@ -436,6 +443,7 @@ impl Default for CouplingConfig {
             legs: default_mode(),
             body: default_mode(),
             friction: default_sand_friction(),
+            legs_yield_with: default_legs_yield_with(),
         }
     }
 }

@@ -3,7 +3,7 @@
 //! rapier step per sand substep of the same dt.
 
 use super::config::CouplingConfig;
-use crate::coupling::{body_surfaces, Coupling, CouplingError, SandCollider};
+use crate::coupling::{body_surfaces, Coupling, CouplingError, LegYield, SandCollider};
 use crate::robot::geometry::LEGS;
 use crate::robot::RobotSim;
 
@@ -40,7 +40,15 @@ pub fn robot_coupling(
             });
         }
     }
-    Ok(Coupling::new(colliders, &world.bodies)?.with_method(cfg.method))
+    let coupling = Coupling::new(colliders, &world.bodies)?.with_method(cfg.method);
+    Ok(match cfg.legs_yield_with {
+        LegYield::Leg => coupling,
+        LegYield::Robot => coupling.with_rigid_group(
+            std::iter::once(robot.body_handle())
+                .chain(robot.leg_handles())
+                .collect(),
+        ),
+    })
 }
 
 /// Depth (m) of the deepest leg point below `surface_z`, or 0.
