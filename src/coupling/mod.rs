@@ -58,11 +58,12 @@ pub enum CouplingMethod {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum LegYield {
-    /// Its own mass, as a free body: stable, but a leg carrying a load `F` creeps into the sand
-    /// at about `F dt / m_leg`, so sinkage and speed follow the step.
+    /// Its own mass, as a free body: the more stable, but a leg carrying a load `F` creeps into
+    /// the sand at about `F dt / m_leg`, so sinkage and speed follow the step.
     Leg,
     /// The whole robot's inertia, all links as one rigid body: no creep, but a leg pushes the
-    /// sand as if its motor could hold any torque, and straight legs blow up at landing.
+    /// sand as if its motor could hold any torque, and every leg shape but the C-leg blows up
+    /// (`docs/speed-vs-accuracy.md`, "The leg that yields with the robot").
     Robot,
 }
 
@@ -88,6 +89,10 @@ pub enum CouplingError {
     TooManyColliders { count: usize },
     #[error("collider {name}: its body is not in the rapier world")]
     MissingBody { name: String },
+    #[error("rigid group: body {body} is not in the rapier world")]
+    GroupBodyMissing { body: String },
+    #[error("rigid group: body {body} is already in another group")]
+    GroupOverlap { body: String },
     #[error("{name}: cannot make its sand surface: {source}")]
     Surface { name: String, source: SurfaceError },
 }
@@ -136,13 +141,30 @@ impl Coupling {
         })
     }
 
-    /// The same colliders, with `bodies` held together within a substep: a two-way collider on
-    /// any of them yields to the sand as one rigid body with all their mass and inertia, as a
-    /// robot's leg does whose motor holds it to the body (`docs/physics.md`, CPIC step 7). A
-    /// body in no group yields alone.
-    pub fn with_rigid_group(mut self, bodies: Vec<RigidBodyHandle>) -> Self {
-        self.rigid_groups.push(bodies);
-        self
+    /// The same colliders, with `group` held together within a substep: a two-way collider on
+    /// any of its bodies yields to the sand as one rigid body with all their mass and inertia,
+    /// as a robot's leg does whose motor holds it to the body (`docs/physics.md`, CPIC step 7).
+    /// A body in no group yields alone. Every body must be in `bodies` and in one group at most.
+    pub fn with_rigid_group(
+        mut self,
+        group: Vec<RigidBodyHandle>,
+        bodies: &RigidBodySet,
+    ) -> Result<Self, CouplingError> {
+        if let Some(&h) = group.iter().find(|&&h| bodies.get(h).is_none()) {
+            return Err(CouplingError::GroupBodyMissing {
+                body: format!("{h:?}"),
+            });
+        }
+        if let Some(&h) = group
+            .iter()
+            .find(|&&h| self.rigid_groups.iter().any(|g| g.contains(&h)))
+        {
+            return Err(CouplingError::GroupOverlap {
+                body: format!("{h:?}"),
+            });
+        }
+        self.rigid_groups.push(group);
+        Ok(self)
     }
 
     /// The same colliders acting by another method.
@@ -222,7 +244,11 @@ impl Coupling {
                     angular_rad_s: to_na(rb.angvel()),
                     centre_m: to_na(rb.center_of_mass()),
                     friction: c.friction,
-                    yield_inertia: yields.then(|| self.yield_inertia(c.body, bodies)),
+                    yield_inertia: if yields {
+                        self.yield_inertia(c.body, bodies)
+                    } else {
+                        None
+                    },
                 }
             })
             .collect();
@@ -233,8 +259,8 @@ impl Coupling {
 
     /// The inertia that yields with `body` within a substep, about its centre of mass: its
     /// group's, as one rigid body, or its own (isotropic, its smallest principal moment, which
-    /// errs on the yielding side).
-    fn yield_inertia(&self, body: RigidBodyHandle, bodies: &RigidBodySet) -> YieldInertia {
+    /// errs on the yielding side). None if a body of its group is not dynamic (held in place).
+    fn yield_inertia(&self, body: RigidBodyHandle, bodies: &RigidBodySet) -> Option<YieldInertia> {
         let rb = &bodies[body];
         let Some(group) = self.rigid_groups.iter().find(|g| g.contains(&body)) else {
             let smallest = rb
@@ -242,9 +268,13 @@ impl Coupling {
                 .local_mprops
                 .principal_inertia()
                 .min_element();
-            return YieldInertia::free_body(rb.mass() as f64, smallest as f64);
+            return Some(YieldInertia::free_body(rb.mass() as f64, smallest as f64));
         };
-        let parts = group.iter().filter_map(|&h| bodies.get(h)).map(|member| {
+        let members: Vec<_> = group.iter().filter_map(|&h| bodies.get(h)).collect();
+        if members.len() < group.len() || members.iter().any(|m| !m.is_dynamic()) {
+            return None;
+        }
+        let parts = members.into_iter().map(|member| {
             let rotation = to_na_matrix(Mat3::from_quat(*member.rotation()));
             let local = to_na_matrix(
                 member
@@ -258,7 +288,10 @@ impl Coupling {
                 rotation * local * rotation.transpose(),
             )
         });
-        YieldInertia::of_parts(parts, &to_na(rb.center_of_mass()).cast::<f64>())
+        Some(YieldInertia::of_parts(
+            parts,
+            &to_na(rb.center_of_mass()).cast::<f64>(),
+        ))
     }
 
     /// Applies the two-way colliders' impulses as forces and torques over `dt`, summed per body.

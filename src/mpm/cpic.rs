@@ -104,17 +104,20 @@ impl YieldInertia {
         spatial_inertia(self.mass_kg, &self.first_moment_kg_m, &self.inertia_kg_m2)
     }
 
-    /// Usable: positive and finite.
+    /// Usable: finite, with positive mass and a positive inertia trace (a singular system is
+    /// caught by the Cholesky factorisation, which then leaves the motion as it is).
     fn is_valid(&self) -> bool {
         self.mass_kg.is_finite()
             && self.mass_kg > 0.0
+            && self.first_moment_kg_m.iter().all(|v| v.is_finite())
             && self.inertia_kg_m2.iter().all(|v| v.is_finite())
             && self.inertia_kg_m2.trace() > 0.0
     }
 }
 
-/// `[[m 1, -[S]x], [[S]x, I]]` for mass `m`, first moment `S` and inertia tensor `I` about one
-/// point: the momentum and angular momentum about that point of a rigid motion given there.
+/// `[[m 1, -[S]x], [[S]x, I]]` for mass `m` (kg), first moment `S` (kg m) and inertia tensor
+/// `I` (kg m^2) about one point: the momentum (N s) and angular momentum about that point
+/// (N m s) of a rigid motion (m/s, rad/s) given there.
 fn spatial_inertia(mass: f64, first_moment: &Vector3<f64>, inertia: &Matrix3<f64>) -> Matrix6<f64> {
     let s_cross = first_moment.cross_matrix();
     let mut m = Matrix6::<f64>::zeros();
@@ -141,9 +144,11 @@ impl ColliderMotion {
     /// (`M_b (v, w)` is what the inertia would carry moving with the collider; only the change
     /// `(v* - v, w* - w)` matters, so the yielding inertia need not move with the collider, as a
     /// robot does not move with its leg.) The ghost velocities then move the sand with that
-    /// motion, and the impulse the body receives changes its motion by about the difference:
-    /// never more than the relative motion, so a light body (a 2 g plate) meeting much more
-    /// sand stays stable in this explicit exchange. Heavy bodies keep their own motion. The
+    /// motion. When the yielding inertia is the body's own, the impulse the body receives
+    /// changes its motion by about the difference: never more than the relative motion, so a
+    /// light body (a 2 g plate) meeting much more sand stays stable in this explicit exchange
+    /// (a group's impulse lands on one light link, which holds no such bound). Heavy bodies
+    /// keep their own motion. The
     /// exchange bounds the force the sand can exert over a substep `dt` by about
     /// `M_b v_rel / dt`: carrying a load `F` takes a relative motion `F dt / M_b`, a creep that
     /// grows with the step (`docs/physics.md`, CPIC step 7).
@@ -498,18 +503,31 @@ mod tests {
             sand_first_moment: r * m,
             sand_inertia: (Matrix3::identity() * r.norm_squared() - r * r.transpose()) * m,
         };
-        let motion = |c: &ColliderMotion| {
-            let (l, a) = (c.linear_m_s.cast::<f64>(), c.angular_rad_s.cast::<f64>());
-            Vector6::new(l.x, l.y, l.z, a.x, a.y, a.z)
-        };
         let y = leg.yielded(Some(&sand));
-        let sand_spatial = spatial_inertia(m, &sand.sand_first_moment, &sand.sand_inertia);
-        let before = robot.spatial() * motion(&leg);
-        let after = robot.spatial() * motion(&y) + sand_spatial * motion(&y);
+        // Momenta about the leg's centre, written out rather than through `spatial`: the robot,
+        // its centre of mass at `e`, moving rigidly with `(v, w)` given at the leg's centre has
+        // p = m (v + w x e) and L = I_c w + e x p; the sand, a point at `r`, likewise.
+        let momenta = |c: &ColliderMotion| {
+            let (v, w) = (c.linear_m_s.cast::<f64>(), c.angular_rad_s.cast::<f64>());
+            let p_robot = (v + w.cross(&e)) * m_r;
+            let p_sand = (v + w.cross(&r)) * m;
+            let angular = centred * w + e.cross(&p_robot) + r.cross(&p_sand);
+            (p_robot + p_sand, angular)
+        };
+        let (p_robot, l_robot) = {
+            let (v, w) = (v.cast::<f64>(), leg.angular_rad_s.cast::<f64>());
+            let p = (v + w.cross(&e)) * m_r;
+            (p, centred * w + e.cross(&p))
+        };
+        let (p_after, l_after) = momenta(&y);
         // The changed motion is stored in f32.
         assert!(
-            (after - before).norm() < 1e-6 * before.norm(),
-            "{after} vs {before}"
+            (p_after - p_robot).norm() < 1e-6 * p_robot.norm(),
+            "{p_after} vs {p_robot}"
+        );
+        assert!(
+            (l_after - l_robot).norm() < 1e-6 * l_robot.norm(),
+            "{l_after} vs {l_robot}"
         );
         // The leg's velocity where it meets the sand.
         let contact = r.cast::<f32>();

@@ -43,11 +43,13 @@ pub fn robot_coupling(
     let coupling = Coupling::new(colliders, &world.bodies)?.with_method(cfg.method);
     Ok(match cfg.legs_yield_with {
         LegYield::Leg => coupling,
+        // The body's own colliders then yield with the whole robot too.
         LegYield::Robot => coupling.with_rigid_group(
             std::iter::once(robot.body_handle())
                 .chain(robot.leg_handles())
                 .collect(),
-        ),
+            &world.bodies,
+        )?,
     })
 }
 
