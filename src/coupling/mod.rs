@@ -270,11 +270,14 @@ impl Coupling {
                 .min_element();
             return Some(YieldInertia::free_body(rb.mass() as f64, smallest as f64));
         };
-        let members: Vec<_> = group.iter().filter_map(|&h| bodies.get(h)).collect();
-        if members.len() < group.len() || members.iter().any(|m| !m.is_dynamic()) {
+        if !group
+            .iter()
+            .all(|&h| bodies.get(h).is_some_and(|b| b.is_dynamic()))
+        {
             return None;
         }
-        let parts = members.into_iter().map(|member| {
+        let parts = group.iter().map(|&h| {
+            let member = &bodies[h];
             let rotation = to_na_matrix(Mat3::from_quat(*member.rotation()));
             let local = to_na_matrix(
                 member

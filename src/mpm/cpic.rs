@@ -148,10 +148,9 @@ impl ColliderMotion {
     /// changes its motion by about the difference: never more than the relative motion, so a
     /// light body (a 2 g plate) meeting much more sand stays stable in this explicit exchange
     /// (a group's impulse lands on one light link, which holds no such bound). Heavy bodies
-    /// keep their own motion. The
-    /// exchange bounds the force the sand can exert over a substep `dt` by about
-    /// `M_b v_rel / dt`: carrying a load `F` takes a relative motion `F dt / M_b`, a creep that
-    /// grows with the step (`docs/physics.md`, CPIC step 7).
+    /// keep their own motion. The exchange bounds the force the sand can exert over a substep
+    /// `dt` by about `M_b v_rel / dt`: carrying a load `F` takes a relative motion `F dt / M_b`,
+    /// a creep that grows with the step (`docs/physics.md`, CPIC step 7).
     pub fn yielded(&self, p2g: Option<&ColliderImpulse>) -> ColliderMotion {
         let Some(body) = self.yield_inertia.filter(YieldInertia::is_valid) else {
             return *self;
@@ -163,9 +162,10 @@ impl ColliderMotion {
             self.linear_m_s.cast::<f64>(),
             self.angular_rad_s.cast::<f64>(),
         );
-        let system = body.spatial()
-            + spatial_inertia(p2g.sand_mass_kg, &p2g.sand_first_moment, &p2g.sand_inertia);
-        let carried = body.spatial() * Vector6::new(v.x, v.y, v.z, w.x, w.y, w.z);
+        let body = body.spatial();
+        let system =
+            body + spatial_inertia(p2g.sand_mass_kg, &p2g.sand_first_moment, &p2g.sand_inertia);
+        let carried = body * Vector6::new(v.x, v.y, v.z, w.x, w.y, w.z);
         let (lin, ang) = (p2g.linear_n_s, p2g.angular_n_m_s);
         let rhs = carried + Vector6::new(lin.x, lin.y, lin.z, ang.x, ang.y, ang.z);
         // The system is a sum of rigid-body spatial inertias: symmetric positive definite.
@@ -504,22 +504,21 @@ mod tests {
             sand_inertia: (Matrix3::identity() * r.norm_squared() - r * r.transpose()) * m,
         };
         let y = leg.yielded(Some(&sand));
-        // Momenta about the leg's centre, written out rather than through `spatial`: the robot,
-        // its centre of mass at `e`, moving rigidly with `(v, w)` given at the leg's centre has
-        // p = m (v + w x e) and L = I_c w + e x p; the sand, a point at `r`, likewise.
-        let momenta = |c: &ColliderMotion| {
+        // Momenta about the leg's centre, written out rather than through `spatial`, of a point
+        // mass `mass` at `at` and inertia `own` about it, moving rigidly with `(v, w)` given at
+        // the leg's centre: p = mass (v + w x at), L = own w + at x p.
+        let momenta = |c: &ColliderMotion, mass: f64, at: &Vector3<f64>, own: &Matrix3<f64>| {
             let (v, w) = (c.linear_m_s.cast::<f64>(), c.angular_rad_s.cast::<f64>());
-            let p_robot = (v + w.cross(&e)) * m_r;
-            let p_sand = (v + w.cross(&r)) * m;
-            let angular = centred * w + e.cross(&p_robot) + r.cross(&p_sand);
-            (p_robot + p_sand, angular)
+            let p = (v + w.cross(at)) * mass;
+            (p, own * w + at.cross(&p))
         };
-        let (p_robot, l_robot) = {
-            let (v, w) = (v.cast::<f64>(), leg.angular_rad_s.cast::<f64>());
-            let p = (v + w.cross(&e)) * m_r;
-            (p, centred * w + e.cross(&p))
+        // Before: the robot moving with the leg, the sand at rest; after: both moving with `y`.
+        let (p_robot, l_robot) = momenta(&leg, m_r, &e, &centred);
+        let (p_after, l_after) = {
+            let (p_r, l_r) = momenta(&y, m_r, &e, &centred);
+            let (p_s, l_s) = momenta(&y, m, &r, &Matrix3::zeros());
+            (p_r + p_s, l_r + l_s)
         };
-        let (p_after, l_after) = momenta(&y);
         // The changed motion is stored in f32.
         assert!(
             (p_after - p_robot).norm() < 1e-6 * p_robot.norm(),
