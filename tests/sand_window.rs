@@ -70,7 +70,7 @@ fn plough(overrides: &[&str]) -> (f64, Option<SandWindow>) {
         friction: scene.config.coupling.friction,
         mode: CouplingMode::OneWay,
     };
-    let coupling = Coupling::new(vec![collider], &bodies).unwrap();
+    let mut coupling = Coupling::new(vec![collider], &bodies).unwrap();
     let dx = sand.grid().dx;
     let start_s = sand.time_s;
     let mut impulse_x = 0.0f64;

@@ -8,11 +8,12 @@
 //! return the impulse each collider received; two-way colliders get it as a force over the
 //! substep, to be applied by the rapier step of the same dt that the caller takes next.
 
+pub mod articulated;
 pub mod surface;
 
 use nalgebra::{Matrix3, Vector3};
 use rapier3d::glamx::{Mat3, Vec3};
-use rapier3d::prelude::{ColliderSet, Pose, RigidBodyHandle, RigidBodySet};
+use rapier3d::prelude::{ColliderSet, MultibodyJointSet, Pose, RigidBodyHandle, RigidBodySet};
 use serde::{Deserialize, Serialize};
 
 use crate::mpm::cpic::{
@@ -65,7 +66,49 @@ pub enum LegYield {
     /// sand as if its motor could hold any torque, and every leg shape but the C-leg blows up
     /// (`docs/speed-vs-accuracy.md`, "The leg that yields with the robot").
     Robot,
+    /// The inertia the robot's multibody presents at the leg, its joints free
+    /// ([`articulated::operational_space_inertia`]): the robot's along the directions the hip
+    /// holds, the leg's own about the hinge. Experimental: with the load predicted
+    /// ([`LoadPrediction::LastSubstep`]) the C-leg robot no longer creeps, but straight legs
+    /// still blow up at landing (`docs/speed-vs-accuracy.md`, "The leg that yields with the
+    /// robot").
+    Articulated,
 }
+
+/// What CPIC's yield (`docs/physics.md` CPIC step 7) takes for a body's velocity over the
+/// substep.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LoadPrediction {
+    /// Its velocity at the start of the substep. The loads the body gets from elsewhere over
+    /// the substep (gravity, joints, motors) reach the sand one substep late, so a body carrying
+    /// a load `F` creeps through the sand at about `F dt / M_b`.
+    None,
+    /// That velocity plus the change every load but the sand's gives it over the substep, as
+    /// measured over the last substep (its velocity change less the sand's impulse over the
+    /// yielding inertia), scaled to this substep's length. Sound only where the yielding
+    /// inertia is the one the body's dynamics present: a free body's own, or a multibody
+    /// link's with [`LegYield::Articulated`] (a leg yielding with its own 2 g while the robot
+    /// carries it turns the estimate into a stiff spring, and the robot blows up).
+    LastSubstep,
+}
+
+/// One two-way body's last substep, for [`LoadPrediction::LastSubstep`].
+#[derive(Clone, Copy, Debug)]
+struct BodyHistory {
+    body: RigidBodyHandle,
+    /// Velocity of the centre of mass (m/s) and angular velocity (rad/s) at its start.
+    start_velocity: (Vec3, Vec3),
+    /// The sand's impulse (N s, N m s about the centre of mass) handed to it.
+    sand_impulse: (Vector3<f64>, Vector3<f64>),
+    /// Its length (s).
+    dt_s: f32,
+    /// Acceleration (m/s^2, rad/s^2) from every load but the sand's, as last estimated.
+    load_rate: Option<(Vec3, Vec3)>,
+}
+
+/// A substep shorter than this fraction of the next one does not update the load estimate.
+const MIN_ESTIMATING_STEP_FRACTION: f32 = 0.5;
 
 /// One rigid collider as the sand sees it.
 #[derive(Clone, Debug)]
@@ -105,6 +148,11 @@ pub struct Coupling {
     /// Bodies that joints and motors hold together within a substep (a robot's links): a
     /// collider on one of them yields to the sand with the whole group's inertia.
     rigid_groups: Vec<Vec<RigidBodyHandle>>,
+    load_prediction: LoadPrediction,
+    /// Multibody links yield with the inertia their multibody presents at them.
+    articulated: bool,
+    /// The two-way bodies' last substep (with [`LoadPrediction::LastSubstep`]).
+    history: Vec<BodyHistory>,
 }
 
 /// A collider at the start of a substep.
@@ -138,6 +186,9 @@ impl Coupling {
             colliders,
             method: CouplingMethod::Cpic,
             rigid_groups: Vec::new(),
+            load_prediction: LoadPrediction::None,
+            history: Vec::new(),
+            articulated: false,
         })
     }
 
@@ -165,6 +216,25 @@ impl Coupling {
         }
         self.rigid_groups.push(group);
         Ok(self)
+    }
+
+    /// The same colliders, with the yield taking the bodies' velocities as `prediction` says.
+    pub fn with_load_prediction(self, prediction: LoadPrediction) -> Self {
+        Coupling {
+            load_prediction: prediction,
+            history: Vec::new(),
+            ..self
+        }
+    }
+
+    /// The same colliders, with a two-way collider on a multibody link yielding with the inertia
+    /// the multibody presents at the link ([`articulated::operational_space_inertia`]; the
+    /// multibody joints must then be given to [`Self::substep_with_joints`]).
+    pub fn with_articulation(self) -> Self {
+        Coupling {
+            articulated: true,
+            ..self
+        }
     }
 
     /// The same colliders acting by another method.
@@ -207,9 +277,20 @@ impl Coupling {
     /// Returns the impulse each coupled collider received (N s, N m s about its body's centre of
     /// mass), one-way colliders included.
     pub fn substep(
-        &self,
+        &mut self,
         solver: &mut Solver,
         bodies: &mut RigidBodySet,
+        dt: f32,
+    ) -> Result<Vec<ColliderImpulse>, SimError> {
+        self.substep_with_joints(solver, bodies, None, dt)
+    }
+
+    /// [`Self::substep`] for bodies that may be multibody links (`joints`).
+    pub fn substep_with_joints(
+        &mut self,
+        solver: &mut Solver,
+        bodies: &mut RigidBodySet,
+        joints: Option<&MultibodyJointSet>,
         dt: f32,
     ) -> Result<Vec<ColliderImpulse>, SimError> {
         let dx = solver.grid().dx;
@@ -233,34 +314,162 @@ impl Coupling {
         solver.begin_substep(&wake_zones);
         let method = self.method;
         solver.colour_nodes(|block| colour_block(block, &placed, method, origin, dx, band));
-        let motions: Vec<ColliderMotion> = self
+        let yield_inertias: Vec<Option<YieldInertia>> = self
             .colliders
             .iter()
             .map(|c| {
+                let yields = c.mode == CouplingMode::TwoWay && bodies[c.body].is_dynamic();
+                yields
+                    .then(|| self.yield_inertia(c.body, bodies, joints))
+                    .flatten()
+            })
+            .collect();
+        let velocities: Vec<(Vec3, Vec3)> = self
+            .colliders
+            .iter()
+            .map(|c| self.body_velocity(c.body, bodies, joints))
+            .collect();
+        self.estimate_load_rates(&velocities, &yield_inertias, dt);
+        let motions: Vec<ColliderMotion> = self
+            .colliders
+            .iter()
+            .zip(&yield_inertias)
+            .zip(&velocities)
+            .map(|((c, &yield_inertia), &(linvel, angvel))| {
                 let rb = &bodies[c.body];
-                let yields = c.mode == CouplingMode::TwoWay && rb.is_dynamic();
+                let (load_kick_m_s, load_kick_rad_s) = match self.load_rate(c.body) {
+                    Some((linear, angular)) if yield_inertia.is_some() => {
+                        (to_na(linear * dt), to_na(angular * dt))
+                    }
+                    _ => Default::default(),
+                };
                 ColliderMotion {
-                    linear_m_s: to_na(rb.linvel()),
-                    angular_rad_s: to_na(rb.angvel()),
+                    linear_m_s: to_na(linvel),
+                    angular_rad_s: to_na(angvel),
                     centre_m: to_na(rb.center_of_mass()),
                     friction: c.friction,
-                    yield_inertia: if yields {
-                        self.yield_inertia(c.body, bodies)
-                    } else {
-                        None
-                    },
+                    yield_inertia,
+                    load_kick_m_s,
+                    load_kick_rad_s,
                 }
             })
             .collect();
         let impulses = solver.finish_substep(dt, &motions)?;
+        self.remember(&impulses, &velocities, dt);
         self.hand_back(&impulses, bodies, dt);
         Ok(impulses)
     }
 
-    /// The inertia that yields with `body` within a substep, about its centre of mass: its
-    /// group's, as one rigid body, or its own (isotropic, its smallest principal moment, which
-    /// errs on the yielding side). None if a body of its group is not dynamic (held in place).
-    fn yield_inertia(&self, body: RigidBodyHandle, bodies: &RigidBodySet) -> Option<YieldInertia> {
+    /// The velocity of `body`'s centre of mass (m/s) and its angular velocity (rad/s): for a
+    /// multibody link with articulation on, from the multibody's generalized velocities
+    /// ([`articulated::link_velocity`]), else its rigid-body velocity.
+    fn body_velocity(
+        &self,
+        body: RigidBodyHandle,
+        bodies: &RigidBodySet,
+        joints: Option<&MultibodyJointSet>,
+    ) -> (Vec3, Vec3) {
+        joints
+            .filter(|_| self.articulated)
+            .and_then(|j| articulated::link_velocity(j, body))
+            .unwrap_or_else(|| (bodies[body].linvel(), bodies[body].angvel()))
+    }
+
+    /// The acceleration (m/s^2, rad/s^2) of `body` from every load but the sand's, as last
+    /// estimated (`LoadPrediction::LastSubstep`).
+    fn load_rate(&self, body: RigidBodyHandle) -> Option<(Vec3, Vec3)> {
+        self.history
+            .iter()
+            .find(|h| h.body == body)
+            .and_then(|h| h.load_rate)
+    }
+
+    /// Updates each two-way body's load acceleration from its last substep: its velocity
+    /// change less what the sand's impulse gave its yielding inertia, over the substep's
+    /// length. A last substep much shorter than the coming one `dt` (the sliver that ends a
+    /// frame) measures too little to scale up, so the previous estimate stands.
+    fn estimate_load_rates(
+        &mut self,
+        velocities: &[(Vec3, Vec3)],
+        yield_inertias: &[Option<YieldInertia>],
+        dt: f32,
+    ) {
+        for h in self.history.iter_mut() {
+            if h.dt_s < MIN_ESTIMATING_STEP_FRACTION * dt {
+                continue;
+            }
+            let Some((inertia, (linvel, angvel))) = self
+                .colliders
+                .iter()
+                .zip(yield_inertias.iter().zip(velocities))
+                .find_map(|(c, (y, v))| y.filter(|_| c.body == h.body).map(|y| (y, *v)))
+            else {
+                h.load_rate = None;
+                continue;
+            };
+            let Some((sand_linear, sand_angular)) =
+                inertia.velocity_change(&h.sand_impulse.0, &h.sand_impulse.1)
+            else {
+                h.load_rate = None;
+                continue;
+            };
+            let to_vec3 = |v: Vector3<f64>| Vec3::new(v.x as f32, v.y as f32, v.z as f32);
+            let linear = (linvel - h.start_velocity.0 - to_vec3(sand_linear)) / h.dt_s;
+            let angular = (angvel - h.start_velocity.1 - to_vec3(sand_angular)) / h.dt_s;
+            h.load_rate = (linear.is_finite() && angular.is_finite()).then_some((linear, angular));
+        }
+    }
+
+    /// Records each two-way body's velocity at the start of this substep, the sand's impulse on
+    /// it over the substep and the substep's length (`LoadPrediction::LastSubstep`).
+    fn remember(&mut self, impulses: &[ColliderImpulse], velocities: &[(Vec3, Vec3)], dt: f32) {
+        if self.load_prediction != LoadPrediction::LastSubstep {
+            return;
+        }
+        for h in self.history.iter_mut() {
+            h.sand_impulse = (Vector3::zeros(), Vector3::zeros());
+        }
+        for ((c, j), &start_velocity) in self.colliders.iter().zip(impulses).zip(velocities) {
+            if c.mode != CouplingMode::TwoWay {
+                continue;
+            }
+            let index = match self.history.iter().position(|h| h.body == c.body) {
+                Some(i) => i,
+                None => {
+                    self.history.push(BodyHistory {
+                        body: c.body,
+                        start_velocity,
+                        sand_impulse: (Vector3::zeros(), Vector3::zeros()),
+                        dt_s: dt,
+                        load_rate: None,
+                    });
+                    self.history.len() - 1
+                }
+            };
+            let h = &mut self.history[index];
+            h.start_velocity = start_velocity;
+            h.dt_s = dt;
+            h.sand_impulse.0 += j.linear_n_s;
+            h.sand_impulse.1 += j.angular_n_m_s;
+        }
+    }
+
+    /// The inertia that yields with `body` within a substep, about its centre of mass: with
+    /// articulation, the inertia its multibody presents at it; else its group's, as one rigid
+    /// body, or its own (isotropic, its smallest principal moment, which errs on the yielding
+    /// side). None if a body of its group is not dynamic (held in place).
+    fn yield_inertia(
+        &self,
+        body: RigidBodyHandle,
+        bodies: &RigidBodySet,
+        joints: Option<&MultibodyJointSet>,
+    ) -> Option<YieldInertia> {
+        if let Some(articulated) = joints
+            .filter(|_| self.articulated)
+            .and_then(|j| articulated::operational_space_inertia(j, body))
+        {
+            return Some(articulated);
+        }
         let rb = &bodies[body];
         let Some(group) = self.rigid_groups.iter().find(|g| g.contains(&body)) else {
             let smallest = rb

@@ -48,31 +48,51 @@ pub struct ColliderMotion {
     /// The inertia that yields to the sand within a substep, about `centre_m`; `None` for
     /// colliders that do not yield (one-way, kinematic).
     pub yield_inertia: Option<YieldInertia>,
+    /// Change of the centre's velocity (m/s) over the substep from every load but the sand's
+    /// (gravity, joints, motors, contacts), as predicted by the coupling; zero for none. The
+    /// yield meets the sand with the velocity the body will have (`yielded`).
+    pub load_kick_m_s: Vector3<f32>,
+    /// The same for the angular velocity (rad/s).
+    pub load_kick_rad_s: Vector3<f32>,
 }
 
-/// Rigid inertia that moves with a collider within a substep, about the collider's centre: its
-/// body's own (free bodies), or that of all the bodies its joints and motors hold it to (a
-/// robot's leg moves with the whole robot: `crate::coupling::Coupling::with_rigid_group`).
+/// Inertia that moves with a collider within a substep, about the collider's centre, as a
+/// spatial inertia (6x6): the momentum and angular momentum about the centre of a rigid motion
+/// `(v, w)` given there. Its body's own (free bodies); that of all the bodies its joints and
+/// motors hold it to (a robot's leg locked to the whole robot:
+/// `crate::coupling::Coupling::with_rigid_group`); or the inertia a multibody presents at the
+/// link, its joints free (`crate::coupling::Coupling::with_articulation`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct YieldInertia {
-    /// Mass (kg).
-    pub mass_kg: f64,
-    /// First moment `m (c - centre)` of the mass about the collider's centre (kg m); zero when
-    /// the centre is the centre of mass.
-    pub first_moment_kg_m: Vector3<f64>,
-    /// Inertia tensor about the collider's centre (kg m^2).
-    pub inertia_kg_m2: Matrix3<f64>,
+    spatial: Matrix6<f64>,
 }
 
 impl YieldInertia {
     /// A free body about its own centre of mass, isotropic with its smallest principal moment
     /// `inertia_kg_m2` (which errs on the yielding side).
     pub fn free_body(mass_kg: f64, inertia_kg_m2: f64) -> Self {
-        YieldInertia {
+        Self::rigid(
             mass_kg,
-            first_moment_kg_m: Vector3::zeros(),
-            inertia_kg_m2: Matrix3::identity() * inertia_kg_m2,
+            &Vector3::zeros(),
+            &(Matrix3::identity() * inertia_kg_m2),
+        )
+    }
+
+    /// One rigid body of mass `mass_kg`, first moment `m (c - centre)` (kg m; zero when the
+    /// centre is its centre of mass) and inertia tensor `inertia_kg_m2` about the centre.
+    pub fn rigid(
+        mass_kg: f64,
+        first_moment_kg_m: &Vector3<f64>,
+        inertia_kg_m2: &Matrix3<f64>,
+    ) -> Self {
+        YieldInertia {
+            spatial: spatial_inertia(mass_kg, first_moment_kg_m, inertia_kg_m2),
         }
+    }
+
+    /// A spatial inertia given whole (a multibody's operational-space inertia at a link).
+    pub fn from_spatial(spatial: Matrix6<f64>) -> Self {
+        YieldInertia { spatial }
     }
 
     /// Parts held together as one rigid body, each `(mass (kg), centre of mass (m), inertia
@@ -82,36 +102,56 @@ impl YieldInertia {
         parts: impl IntoIterator<Item = (f64, Vector3<f64>, Matrix3<f64>)>,
         centre: &Vector3<f64>,
     ) -> Self {
-        let mut total = YieldInertia {
-            mass_kg: 0.0,
-            first_moment_kg_m: Vector3::zeros(),
-            inertia_kg_m2: Matrix3::zeros(),
-        };
-        for (mass, com, inertia) in parts {
+        let (mut mass_kg, mut first_moment, mut inertia) =
+            (0.0, Vector3::zeros(), Matrix3::zeros());
+        for (mass, com, own) in parts {
             let offset = com - centre;
-            total.mass_kg += mass;
-            total.first_moment_kg_m += offset * mass;
-            total.inertia_kg_m2 += inertia
+            mass_kg += mass;
+            first_moment += offset * mass;
+            inertia += own
                 + (Matrix3::identity() * offset.norm_squared() - offset * offset.transpose())
                     * mass;
         }
-        total
+        Self::rigid(mass_kg, &first_moment, &inertia)
     }
 
-    /// Spatial inertia (6x6): momentum and angular momentum about the centre of a rigid motion
-    /// `(v, w)` given at the centre.
-    fn spatial(&self) -> Matrix6<f64> {
-        spatial_inertia(self.mass_kg, &self.first_moment_kg_m, &self.inertia_kg_m2)
+    /// The spatial inertia (6x6) about the centre.
+    pub fn spatial(&self) -> &Matrix6<f64> {
+        &self.spatial
     }
 
-    /// Usable: finite, with positive mass and a positive inertia trace (a singular system is
+    /// Change of a rigid motion `(m/s, rad/s)` at the centre that an impulse `(N s, N m s
+    /// about the centre)` gives this inertia; None if it is singular.
+    pub fn velocity_change(
+        &self,
+        linear_n_s: &Vector3<f64>,
+        angular_n_m_s: &Vector3<f64>,
+    ) -> Option<(Vector3<f64>, Vector3<f64>)> {
+        if !self.is_valid() {
+            return None;
+        }
+        let impulse = Vector6::new(
+            linear_n_s.x,
+            linear_n_s.y,
+            linear_n_s.z,
+            angular_n_m_s.x,
+            angular_n_m_s.y,
+            angular_n_m_s.z,
+        );
+        let change = self.spatial().cholesky()?.solve(&impulse);
+        Some((
+            change.fixed_rows::<3>(0).into_owned(),
+            change.fixed_rows::<3>(3).into_owned(),
+        ))
+    }
+
+    /// Usable: finite, with a positive mass and a positive inertia trace (a singular system is
     /// caught by the Cholesky factorisation, which then leaves the motion as it is).
     fn is_valid(&self) -> bool {
-        self.mass_kg.is_finite()
-            && self.mass_kg > 0.0
-            && self.first_moment_kg_m.iter().all(|v| v.is_finite())
-            && self.inertia_kg_m2.iter().all(|v| v.is_finite())
-            && self.inertia_kg_m2.trace() > 0.0
+        let s = &self.spatial;
+        s.iter().all(|v| v.is_finite())
+            && s.fixed_view::<3, 3>(0, 0).trace() > 0.0
+            && s.fixed_view::<3, 3>(3, 3).trace() > 0.0
     }
 }
 
@@ -159,10 +199,10 @@ impl ColliderMotion {
             return *self;
         };
         let (v, w) = (
-            self.linear_m_s.cast::<f64>(),
-            self.angular_rad_s.cast::<f64>(),
+            (self.linear_m_s + self.load_kick_m_s).cast::<f64>(),
+            (self.angular_rad_s + self.load_kick_rad_s).cast::<f64>(),
         );
-        let body = body.spatial();
+        let body = *body.spatial();
         let system =
             body + spatial_inertia(p2g.sand_mass_kg, &p2g.sand_first_moment, &p2g.sand_inertia);
         let carried = body * Vector6::new(v.x, v.y, v.z, w.x, w.y, w.z);
@@ -417,6 +457,8 @@ mod tests {
             centre_m: Vector3::zeros(),
             friction: 0.3,
             yield_inertia: Some(YieldInertia::free_body(0.002, 2e-8)),
+            load_kick_m_s: Vector3::zeros(),
+            load_kick_rad_s: Vector3::zeros(),
         };
         // 20 g of sand, 1 cm above the centre, moving at v.
         let (m, r) = (0.02f64, Vector3::new(0.0, 0.0, 0.01f64));
@@ -463,13 +505,15 @@ mod tests {
         let own = Matrix3::from_diagonal(&Vector3::new(1e-3, 2e-3, 3e-3));
         let (a, b) = (Vector3::new(0.1, 0.0, 0.0), Vector3::new(0.3, 0.0, 0.0));
         let pair = YieldInertia::of_parts([(1.0, a, own), (1.0, b, own)], &a);
-        assert_eq!(pair.mass_kg, 2.0);
-        assert!((pair.first_moment_kg_m - Vector3::new(0.2, 0.0, 0.0)).norm() < 1e-12);
-        let expected = own * 2.0 + Matrix3::from_diagonal(&Vector3::new(0.0, 0.04, 0.04));
+        let expected = YieldInertia::rigid(
+            2.0,
+            &Vector3::new(0.2, 0.0, 0.0),
+            &(own * 2.0 + Matrix3::from_diagonal(&Vector3::new(0.0, 0.04, 0.04))),
+        );
         assert!(
-            (pair.inertia_kg_m2 - expected).norm() < 1e-12,
+            (pair.spatial() - expected.spatial()).norm() < 1e-12,
             "{}",
-            pair.inertia_kg_m2
+            pair.spatial()
         );
     }
 
@@ -482,18 +526,19 @@ mod tests {
         let v = Vector3::new(0.05, 0.0, -0.3f32);
         let (m_r, e) = (0.085f64, Vector3::new(0.0, 0.0, 0.03f64));
         let centred = Matrix3::from_diagonal(&Vector3::new(1e-4, 2e-4, 2e-4));
-        let robot = YieldInertia {
-            mass_kg: m_r,
-            first_moment_kg_m: e * m_r,
-            inertia_kg_m2: centred
-                + (Matrix3::identity() * e.norm_squared() - e * e.transpose()) * m_r,
-        };
+        let robot = YieldInertia::rigid(
+            m_r,
+            &(e * m_r),
+            &(centred + (Matrix3::identity() * e.norm_squared() - e * e.transpose()) * m_r),
+        );
         let leg = ColliderMotion {
             linear_m_s: v,
             angular_rad_s: Vector3::new(0.0, 2.0, 0.0),
             centre_m: Vector3::zeros(),
             friction: 0.3,
             yield_inertia: Some(robot),
+            load_kick_m_s: Vector3::zeros(),
+            load_kick_rad_s: Vector3::zeros(),
         };
         let (m, r) = (0.02f64, Vector3::new(0.004, 0.0, -0.01f64));
         let sand = ColliderImpulse {
@@ -538,6 +583,8 @@ mod tests {
         );
         let alone = ColliderMotion {
             yield_inertia: Some(YieldInertia::free_body(0.002, 2e-8)),
+            load_kick_m_s: Vector3::zeros(),
+            load_kick_rad_s: Vector3::zeros(),
             ..leg
         };
         let stopped = alone.yielded(Some(&sand)).velocity_at(&contact);

@@ -45,6 +45,16 @@ pub fn validate(scene: &Scene) -> Result<(), SceneError> {
             format!("{} must be a finite number >= 0", c.coupling.friction),
         ));
     }
+    if c.coupling.load_prediction == crate::coupling::LoadPrediction::LastSubstep
+        && c.coupling.legs_yield_with != crate::coupling::LegYield::Articulated
+    {
+        return Err(scene.invalid(
+            "coupling.load_prediction",
+            "last_substep needs coupling.legs_yield_with: articulated (a leg that yields with \
+             any other inertia than its multibody's turns the prediction into a stiff spring: \
+             docs/physics.md, CPIC step 7)",
+        ));
+    }
     let Some(sand) = scene.sand() else {
         return if c.column_collapse.is_some() {
             Err(scene.invalid(

@@ -40,9 +40,12 @@ pub fn robot_coupling(
             });
         }
     }
-    let coupling = Coupling::new(colliders, &world.bodies)?.with_method(cfg.method);
+    let coupling = Coupling::new(colliders, &world.bodies)?
+        .with_method(cfg.method)
+        .with_load_prediction(cfg.load_prediction);
     Ok(match cfg.legs_yield_with {
         LegYield::Leg => coupling,
+        LegYield::Articulated => coupling.with_articulation(),
         // The body's own colliders then yield with the whole robot too.
         LegYield::Robot => coupling.with_rigid_group(
             std::iter::once(robot.body_handle())

@@ -55,7 +55,7 @@ pub fn press_plate(sand: &mut Solver, press: &PlatePress) -> Result<Vec<PlateSam
         friction: press.friction,
         mode: CouplingMode::OneWay,
     };
-    let coupling = Coupling::new(vec![collider], &bodies).expect("one collider, in the set");
+    let mut coupling = Coupling::new(vec![collider], &bodies).expect("one collider, in the set");
     let dx = sand.grid().dx;
     let end_s = sand.time_s + (press.final_depth_m / press.speed_m_s) as f64;
     let mut samples = Vec::new();

@@ -46,7 +46,7 @@ pub fn solver(max_m: [f32; 3], gravity: [f32; 3], bodies: &str) -> Solver {
 /// only, no rapier contacts needed); the other bodies move at their velocity.
 pub fn run(
     solver: &mut Solver,
-    coupling: &Coupling,
+    coupling: &mut Coupling,
     bodies: &mut RigidBodySet,
     until_s: f64,
     dynamic: Option<(RigidBodyHandle, f32)>,
@@ -90,7 +90,7 @@ pub fn push_plate_through_layer(method: CouplingMethod) -> (usize, usize) {
             .translation(Vec3::new(x0, 0.015, 0.02))
             .linvel(Vec3::new(speed, 0.0, 0.0)),
     );
-    let coupling = Coupling::new(
+    let mut coupling = Coupling::new(
         vec![collider("plate", plate, surface, CouplingMode::OneWay)],
         &bodies,
     )
@@ -98,7 +98,7 @@ pub fn push_plate_through_layer(method: CouplingMethod) -> (usize, usize) {
     .with_method(method);
     let start_x: Vec<f32> = sand.particles.position.iter().map(|x| x.x).collect();
     let duration = 0.1;
-    run(&mut sand, &coupling, &mut bodies, duration, None);
+    run(&mut sand, &mut coupling, &mut bodies, duration, None);
     let plate_x = bodies[plate].translation().x;
     assert!((plate_x - (x0 + speed * duration as f32)).abs() < 0.01 * DX + speed * 2e-3);
     let behind = sand
@@ -147,7 +147,7 @@ pub fn plough(solver_settings: &str, rest_s: f64) -> Plough {
             .linvel(Vec3::new(speed, 0.0, 0.0)),
     );
     let surface = CpicSurface::thin_box([0.1 * DX, 0.01, 0.01]);
-    let coupling = Coupling::new(
+    let mut coupling = Coupling::new(
         vec![collider("plate", plate, surface, CouplingMode::OneWay)],
         &bodies,
     )

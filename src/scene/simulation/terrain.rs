@@ -129,9 +129,14 @@ impl Terrain {
         let impulses = match self {
             Terrain::RigidGround => Vec::new(),
             Terrain::Sand(sand) => {
-                let coupling = sand.coupling.as_ref().expect("a robot on sand is coupled");
-                let bodies = &mut robot.world_mut().bodies;
-                let impulses = coupling.substep(&mut sand.solver, bodies, dt_s as f32)?;
+                let coupling = sand.coupling.as_mut().expect("a robot on sand is coupled");
+                let world = robot.world_mut();
+                let impulses = coupling.substep_with_joints(
+                    &mut sand.solver,
+                    &mut world.bodies,
+                    Some(&world.multibody_joints),
+                    dt_s as f32,
+                )?;
                 coupling
                     .colliders()
                     .iter()
