@@ -13,7 +13,9 @@ pub mod surface;
 
 use nalgebra::{Matrix3, Vector3};
 use rapier3d::glamx::{Mat3, Vec3};
-use rapier3d::prelude::{ColliderSet, MultibodyJointSet, Pose, RigidBodyHandle, RigidBodySet};
+use rapier3d::prelude::{
+    ColliderSet, MultibodyJointSet, Pose, RigidBody, RigidBodyHandle, RigidBodySet,
+};
 use serde::{Deserialize, Serialize};
 
 use crate::mpm::cpic::{
@@ -70,8 +72,8 @@ pub enum LegYield {
     /// ([`articulated::operational_space_inertia`]): the robot's along the directions the hip
     /// holds, the leg's own about the hinge. Experimental: with the load predicted
     /// ([`LoadPrediction::LastSubstep`]) the C-leg robot no longer creeps, but straight legs
-    /// still blow up at landing (`docs/speed-vs-accuracy.md`, "The leg that yields with the
-    /// robot").
+    /// still blow up at landing (`docs/speed-vs-accuracy.md`, "The leg that yields as its
+    /// multibody presents it").
     Articulated,
 }
 
@@ -84,12 +86,16 @@ pub enum LoadPrediction {
     /// the substep (gravity, joints, motors) reach the sand one substep late, so a body carrying
     /// a load `F` creeps through the sand at about `F dt / M_b`.
     None,
-    /// That velocity plus the change every load but the sand's gives it over the substep, as
-    /// measured over the last substep (its velocity change less the sand's impulse over the
-    /// yielding inertia), scaled to this substep's length. Sound only where the yielding
-    /// inertia is the one the body's dynamics present: a free body's own, or a multibody
-    /// link's with [`LegYield::Articulated`] (a leg yielding with its own 2 g while the robot
-    /// carries it turns the estimate into a stiff spring, and the robot blows up).
+    /// That velocity plus the change every load but the sand's on this body gives it over the
+    /// substep (gravity, joints, motors, and the sand's pushes on the other links of its
+    /// multibody, a substep late), as measured over the last substep: its velocity change less
+    /// the sand's impulse over the inertia its dynamics present, scaled to this substep's
+    /// length. Sound only where the yielding inertia is that inertia too: a multibody link with
+    /// [`LegYield::Articulated`] (a leg yielding with its own 2 g while the robot carries it
+    /// turns the estimate into a stiff spring, and the robot goes wild); a free body, though it
+    /// yields isotropically with its smallest moment, which makes its spin estimate a soft
+    /// spring. Bodies whose response is not known (multibody links without articulation,
+    /// rigid groups) get no prediction.
     LastSubstep,
 }
 
@@ -329,7 +335,14 @@ impl Coupling {
             .iter()
             .map(|c| self.body_velocity(c.body, bodies, joints))
             .collect();
-        self.estimate_load_rates(&velocities, &yield_inertias, dt);
+        if self.load_prediction == LoadPrediction::LastSubstep {
+            let response_inertias: Vec<Option<YieldInertia>> = self
+                .colliders
+                .iter()
+                .map(|c| self.response_inertia(c.body, bodies, joints))
+                .collect();
+            self.estimate_load_rates(&velocities, &response_inertias, dt);
+        }
         let motions: Vec<ColliderMotion> = self
             .colliders
             .iter()
@@ -385,13 +398,16 @@ impl Coupling {
     }
 
     /// Updates each two-way body's load acceleration from its last substep: its velocity
-    /// change less what the sand's impulse gave its yielding inertia, over the substep's
-    /// length. A last substep much shorter than the coming one `dt` (the sliver that ends a
-    /// frame) measures too little to scale up, so the previous estimate stands.
+    /// change less what the sand's impulse on it gave its response inertia (`response_inertias`,
+    /// per collider, [`Self::response_inertia`]), over the substep's length. None where the
+    /// response inertia is not known. A last substep much shorter than the coming one `dt` (the
+    /// sliver that ends a frame) measures too little to scale up, so the previous estimate
+    /// stands. Assumes one rigid-body step of the substep's length between two substeps: any
+    /// other change of a body's velocity counts as load.
     fn estimate_load_rates(
         &mut self,
         velocities: &[(Vec3, Vec3)],
-        yield_inertias: &[Option<YieldInertia>],
+        response_inertias: &[Option<YieldInertia>],
         dt: f32,
     ) {
         for h in self.history.iter_mut() {
@@ -401,7 +417,7 @@ impl Coupling {
             let Some((inertia, (linvel, angvel))) = self
                 .colliders
                 .iter()
-                .zip(yield_inertias.iter().zip(velocities))
+                .zip(response_inertias.iter().zip(velocities))
                 .find_map(|(c, (y, v))| y.filter(|_| c.body == h.body).map(|y| (y, *v)))
             else {
                 h.load_rate = None;
@@ -487,22 +503,45 @@ impl Coupling {
         }
         let parts = group.iter().map(|&h| {
             let member = &bodies[h];
-            let rotation = to_na_matrix(Mat3::from_quat(*member.rotation()));
-            let local = to_na_matrix(
-                member
-                    .mass_properties()
-                    .local_mprops
-                    .reconstruct_inertia_matrix(),
-            );
             (
                 member.mass() as f64,
                 to_na(member.center_of_mass()).cast::<f64>(),
-                rotation * local * rotation.transpose(),
+                world_inertia(member),
             )
         });
         Some(YieldInertia::of_parts(
             parts,
             &to_na(rb.center_of_mass()).cast::<f64>(),
+        ))
+    }
+
+    /// The inertia with which `body`'s dynamics answer an impulse on it alone, about its centre
+    /// of mass, for [`LoadPrediction::LastSubstep`]: with articulation, the inertia its
+    /// multibody presents at it; a free body's own full inertia tensor. None where it is not
+    /// known: a multibody link without articulation, a body of a rigid group (the group is a
+    /// lock the exchange assumes, not the body's dynamics); such a body gets no prediction.
+    fn response_inertia(
+        &self,
+        body: RigidBodyHandle,
+        bodies: &RigidBodySet,
+        joints: Option<&MultibodyJointSet>,
+    ) -> Option<YieldInertia> {
+        if let Some(joints) = joints {
+            if joints.rigid_body_link(body).is_some() {
+                return self
+                    .articulated
+                    .then(|| articulated::operational_space_inertia(joints, body))
+                    .flatten();
+            }
+        }
+        if self.rigid_groups.iter().any(|g| g.contains(&body)) {
+            return None;
+        }
+        let rb = &bodies[body];
+        Some(YieldInertia::rigid(
+            rb.mass() as f64,
+            &Vector3::zeros(),
+            &world_inertia(rb),
         ))
     }
 
@@ -706,10 +745,91 @@ fn world_aabb(pose: &Pose, (min, max): ([f32; 3], [f32; 3])) -> (Vector3<f32>, V
 }
 
 /// A rapier 3x3 matrix in f64 nalgebra.
+/// A body's inertia tensor about its centre of mass in world axes (kg m^2).
+fn world_inertia(rb: &RigidBody) -> Matrix3<f64> {
+    let rotation = to_na_matrix(Mat3::from_quat(*rb.rotation()));
+    let local = to_na_matrix(
+        rb.mass_properties()
+            .local_mprops
+            .reconstruct_inertia_matrix(),
+    );
+    rotation * local * rotation.transpose()
+}
+
 fn to_na_matrix(m: Mat3) -> Matrix3<f64> {
     Matrix3::from_fn(|r, c| m.col(c)[r] as f64)
 }
 
 fn to_na(v: Vec3) -> Vector3<f32> {
     Vector3::new(v.x, v.y, v.z)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rapier3d::prelude::{MassProperties, RigidBodyBuilder, SharedShape};
+
+    /// A steel ball coupled both ways, with the load predicted.
+    fn predicted_ball() -> (Coupling, RigidBodySet, RigidBodyHandle) {
+        let mut bodies = RigidBodySet::new();
+        // Steel, 1 cm radius: 33 g.
+        let handle = bodies.insert(
+            RigidBodyBuilder::dynamic()
+                .additional_mass_properties(MassProperties::from_ball(7800.0, 0.01)),
+        );
+        bodies[handle].recompute_mass_properties_from_colliders(&ColliderSet::new());
+        let collider = SandCollider {
+            name: "ball".into(),
+            body: handle,
+            body_to_surface: Pose::IDENTITY,
+            surface: CpicSurface::Solid(SharedShape::ball(0.01)),
+            friction: 0.3,
+            mode: CouplingMode::TwoWay,
+        };
+        let coupling = Coupling::new(vec![collider], &bodies)
+            .unwrap()
+            .with_load_prediction(LoadPrediction::LastSubstep);
+        (coupling, bodies, handle)
+    }
+
+    /// A body that fell freely by `g dt` while the sand pushed it up by `J / m` carried a
+    /// load of `g`: the sand's share is taken out. A sliver of a step after it keeps that
+    /// estimate however noisy its own change.
+    #[test]
+    fn the_load_is_the_velocity_change_less_the_sand() {
+        let (mut coupling, bodies, ball) = predicted_ball();
+        let (dt, g, push) = (1e-4f32, Vec3::new(0.0, 0.0, -9.81), 2e-6f64);
+        let start = (Vec3::new(0.1, 0.0, 0.0), Vec3::ZERO);
+        let sand = ColliderImpulse {
+            linear_n_s: Vector3::new(0.0, 0.0, push),
+            ..Default::default()
+        };
+        coupling.remember(&[sand], &[start], dt);
+        let mass = bodies[ball].mass();
+        let now = start.0 + g * dt + Vec3::new(0.0, 0.0, push as f32 / mass);
+        let response = [coupling.response_inertia(ball, &bodies, None)];
+        coupling.estimate_load_rates(&[(now, Vec3::ZERO)], &response, dt);
+        let (linear, angular) = coupling.load_rate(ball).expect("estimated");
+        assert!((linear - g).length() < 1e-3, "{linear:?}");
+        assert!(angular.length() < 1e-6, "{angular:?}");
+        // A sliver: its change says nothing about the load.
+        coupling.remember(
+            &[ColliderImpulse::default()],
+            &[(now, Vec3::ZERO)],
+            0.1 * dt,
+        );
+        let noisy = (now + Vec3::new(0.3, 0.0, 0.0), Vec3::ZERO);
+        coupling.estimate_load_rates(&[noisy], &response, dt);
+        let kept = coupling.load_rate(ball).expect("kept").0;
+        assert!((kept - g).length() < 1e-3, "{kept:?}");
+    }
+
+    /// Without articulation a multibody link's response is not known, nor a rigid group's:
+    /// no prediction for them.
+    #[test]
+    fn no_prediction_where_the_response_is_unknown() {
+        let (coupling, bodies, ball) = predicted_ball();
+        let grouped = coupling.with_rigid_group(vec![ball], &bodies).unwrap();
+        assert!(grouped.response_inertia(ball, &bodies, None).is_none());
+    }
 }

@@ -175,7 +175,8 @@ impl ColliderMotion {
     /// mass `M_s`, first moment `S = sum w m r`, inertia tensor `I_s = sum w m (|r|^2 1 - r
     /// r^T)`, momentum `P_s` and angular momentum `L_s` (all about the centre). Body and sand
     /// are given the one rigid motion `(v*, w*)` that keeps their momentum and angular momentum
-    /// (a perfectly inelastic exchange; `(v, w)` the collider's motion):
+    /// (a perfectly inelastic exchange; `(v, w)` the collider's motion plus the predicted load
+    /// kick, zero unless the coupling predicts it):
     ///
     /// ```text
     /// (M_b + M_sand) (v*, w*) = M_b (v, w) + (P_s, L_s),   M_sand = [[M_s 1, -[S]x], [[S]x, I_s]]
@@ -191,6 +192,9 @@ impl ColliderMotion {
     /// keep their own motion. The exchange bounds the force the sand can exert over a substep
     /// `dt` by about `M_b v_rel / dt`: carrying a load `F` takes a relative motion `F dt / M_b`,
     /// a creep that grows with the step (`docs/physics.md`, CPIC step 7).
+    ///
+    /// With no sand met the motion stays the collider's own, without the kick: nothing is
+    /// exchanged, and the push-back then uses the body's velocity at the substep's start.
     pub fn yielded(&self, p2g: Option<&ColliderImpulse>) -> ColliderMotion {
         let Some(body) = self.yield_inertia.filter(YieldInertia::is_valid) else {
             return *self;
