@@ -320,13 +320,24 @@ impl Coupling {
         solver.begin_substep(&wake_zones);
         let method = self.method;
         solver.colour_nodes(|block| colour_block(block, &placed, method, origin, dx, band));
-        let yield_inertias: Vec<Option<YieldInertia>> = self
+        // The inertia each multibody link presents, computed once per collider and substep.
+        let articulated: Vec<Option<YieldInertia>> = self
             .colliders
             .iter()
             .map(|c| {
+                joints
+                    .filter(|_| self.articulated)
+                    .and_then(|j| articulated::operational_space_inertia(j, c.body))
+            })
+            .collect();
+        let yield_inertias: Vec<Option<YieldInertia>> = self
+            .colliders
+            .iter()
+            .zip(&articulated)
+            .map(|(c, &articulated)| {
                 let yields = c.mode == CouplingMode::TwoWay && bodies[c.body].is_dynamic();
                 yields
-                    .then(|| self.yield_inertia(c.body, bodies, joints))
+                    .then(|| articulated.or_else(|| self.yield_inertia(c.body, bodies)))
                     .flatten()
             })
             .collect();
@@ -339,7 +350,8 @@ impl Coupling {
             let response_inertias: Vec<Option<YieldInertia>> = self
                 .colliders
                 .iter()
-                .map(|c| self.response_inertia(c.body, bodies, joints))
+                .zip(&articulated)
+                .map(|(c, &articulated)| self.response_inertia(c.body, bodies, joints, articulated))
                 .collect();
             self.estimate_load_rates(&velocities, &response_inertias, dt);
         }
@@ -470,22 +482,11 @@ impl Coupling {
         }
     }
 
-    /// The inertia that yields with `body` within a substep, about its centre of mass: with
-    /// articulation, the inertia its multibody presents at it; else its group's, as one rigid
-    /// body, or its own (isotropic, its smallest principal moment, which errs on the yielding
-    /// side). None if a body of its group is not dynamic (held in place).
-    fn yield_inertia(
-        &self,
-        body: RigidBodyHandle,
-        bodies: &RigidBodySet,
-        joints: Option<&MultibodyJointSet>,
-    ) -> Option<YieldInertia> {
-        if let Some(articulated) = joints
-            .filter(|_| self.articulated)
-            .and_then(|j| articulated::operational_space_inertia(j, body))
-        {
-            return Some(articulated);
-        }
+    /// The inertia that yields with `body` within a substep, about its centre of mass, where
+    /// it is no articulated link: its group's, as one rigid body, or its own (isotropic, its
+    /// smallest principal moment, which errs on the yielding side). None if a body of its
+    /// group is not dynamic (held in place).
+    fn yield_inertia(&self, body: RigidBodyHandle, bodies: &RigidBodySet) -> Option<YieldInertia> {
         let rb = &bodies[body];
         let Some(group) = self.rigid_groups.iter().find(|g| g.contains(&body)) else {
             let smallest = rb
@@ -516,23 +517,20 @@ impl Coupling {
     }
 
     /// The inertia with which `body`'s dynamics answer an impulse on it alone, about its centre
-    /// of mass, for [`LoadPrediction::LastSubstep`]: with articulation, the inertia its
-    /// multibody presents at it; a free body's own full inertia tensor. None where it is not
-    /// known: a multibody link without articulation, a body of a rigid group (the group is a
-    /// lock the exchange assumes, not the body's dynamics); such a body gets no prediction.
+    /// of mass, for [`LoadPrediction::LastSubstep`]: for a multibody link, the inertia its
+    /// multibody presents at it (`articulated`, known only with articulation); a free body's
+    /// own full inertia tensor. None where it is not known: a multibody link without
+    /// articulation, a body of a rigid group (the group is a lock the exchange assumes, not the
+    /// body's dynamics); such a body gets no prediction.
     fn response_inertia(
         &self,
         body: RigidBodyHandle,
         bodies: &RigidBodySet,
         joints: Option<&MultibodyJointSet>,
+        articulated: Option<YieldInertia>,
     ) -> Option<YieldInertia> {
-        if let Some(joints) = joints {
-            if joints.rigid_body_link(body).is_some() {
-                return self
-                    .articulated
-                    .then(|| articulated::operational_space_inertia(joints, body))
-                    .flatten();
-            }
+        if joints.is_some_and(|j| j.rigid_body_link(body).is_some()) {
+            return articulated;
         }
         if self.rigid_groups.iter().any(|g| g.contains(&body)) {
             return None;
@@ -807,7 +805,7 @@ mod tests {
         coupling.remember(&[sand], &[start], dt);
         let mass = bodies[ball].mass();
         let now = start.0 + g * dt + Vec3::new(0.0, 0.0, push as f32 / mass);
-        let response = [coupling.response_inertia(ball, &bodies, None)];
+        let response = [coupling.response_inertia(ball, &bodies, None, None)];
         coupling.estimate_load_rates(&[(now, Vec3::ZERO)], &response, dt);
         let (linear, angular) = coupling.load_rate(ball).expect("estimated");
         assert!((linear - g).length() < 1e-3, "{linear:?}");
@@ -830,6 +828,8 @@ mod tests {
     fn no_prediction_where_the_response_is_unknown() {
         let (coupling, bodies, ball) = predicted_ball();
         let grouped = coupling.with_rigid_group(vec![ball], &bodies).unwrap();
-        assert!(grouped.response_inertia(ball, &bodies, None).is_none());
+        assert!(grouped
+            .response_inertia(ball, &bodies, None, None)
+            .is_none());
     }
 }
