@@ -118,10 +118,13 @@ fn a_leg_ploughing_the_bed_meets_the_same_sand_in_the_window() {
 
 /// The robot run of [`robot_walks_in_a_window_that_follows_it`] (s).
 const WALK_S: f64 = 1.5;
-/// Slowest the C-leg robot may walk over that run (m/s), from the start: measured
-/// (2026-12-04, the CPIC band as the bulk, damped sand, 5 starts 7 um apart) 0.145 +- 0.025
-/// m/s (0.105 to 0.169), so the bound is 4.5 spreads below; a robot that stalls fails it.
-const WALK_SPEED_BOUND_M_S: f64 = 0.03;
+/// The window's reach behind the robot's centre (m), as in [`WINDOW`].
+const WINDOW_BEHIND_M: f64 = 0.1;
+// The robot's speed over this run is no test of the window: from the start it is chaotic,
+// 0.114 +- 0.054 m/s over 5 starts 7 um apart (0.057 to 0.195; 2026-12-04, sixth session, the
+// legs yielding as the multibody presents them), and as spread on the whole bed (0.172 and
+// 0.062 at the first two starts). What the window must do is follow the robot: the test
+// checks that the window moved and that it holds the robot with its reach behind.
 
 #[test]
 fn robot_walks_in_a_window_that_follows_it() {
@@ -150,12 +153,14 @@ fn robot_walks_in_a_window_that_follows_it() {
         m["sand_dropped"]
     );
     assert!(
-        number("mean_speed_m_s") > WALK_SPEED_BOUND_M_S,
-        "the robot must walk in the window: {m}"
-    );
-    assert!(
         number("sand_added") > 0.0 && number("sand_dropped") > 0.0,
-        "{m}"
+        "the window must move with the robot: {m}"
+    );
+    let window: Vec<f64> = serde_json::from_value(m["sand_window_m"].clone()).unwrap();
+    let x = m["final_position_m"][0].as_f64().unwrap();
+    assert!(
+        window[0] <= x - WINDOW_BEHIND_M && x < window[1],
+        "the window {window:?} m must hold the robot at x = {x} m with its reach behind"
     );
     // The whole bed at this grid holds 55 860 particles; the window well under half of it.
     let whole_bed = Scene::load(Path::new(SCENE), &[DX.to_string()])

@@ -105,11 +105,10 @@ fn out_of_range_values() {
             "column_collapse.particles_per_cell=5",
             "column_collapse.particles_per_cell",
         ),
-        // The prediction needs the yielding inertia the link's dynamics present.
-        (
-            "coupling.load_prediction=last_substep",
-            "coupling.load_prediction",
-        ),
+        // The prediction (on by default) needs the yielding inertia the link's dynamics
+        // present: another yield is refused, naming both fields.
+        ("coupling.legs_yield_with=leg", "coupling.legs_yield_with"),
+        ("coupling.legs_yield_with=robot", "coupling.load_prediction"),
     ] {
         assert_names(&error_of(SCENE, &[set]), &["scenes/test.yaml", field]);
     }

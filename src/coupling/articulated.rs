@@ -28,9 +28,15 @@ pub fn operational_space_inertia(
         return None;
     }
     let response = mass.solve(&jacobian.transpose())?;
-    let mobility = jacobian * response;
-    let mobility =
-        Matrix6::<f64>::from_fn(|r, c| 0.5 * (mobility[(r, c)] + mobility[(c, r)]) as f64);
+    // J (M^-1 J^T), summed here in f64: nalgebra hands a product of dynamic matrices to
+    // `matrixmultiply`, which picks its kernel (FMA or not) by the CPU at run time, and the
+    // answers would differ between machines.
+    let product = |r: usize, c: usize| -> f64 {
+        (0..jacobian.ncols())
+            .map(|k| jacobian[(r, k)] as f64 * response[(k, c)] as f64)
+            .sum()
+    };
+    let mobility = Matrix6::<f64>::from_fn(|r, c| 0.5 * (product(r, c) + product(c, r)));
     let inertia = mobility.cholesky()?.inverse();
     let inertia = Matrix6::from_fn(|r, c| 0.5 * (inertia[(r, c)] + inertia[(c, r)]));
     Some(YieldInertia::from_spatial(inertia))
@@ -50,8 +56,13 @@ pub fn link_velocity(joints: &MultibodyJointSet, body: RigidBodyHandle) -> Optio
     if jacobian.ncols() != velocities.nrows() {
         return None;
     }
-    let v = jacobian * velocities;
-    Some((Vec3::new(v[0], v[1], v[2]), Vec3::new(v[3], v[4], v[5])))
+    // Summed here, in a fixed order (see `operational_space_inertia`).
+    let v = |r: usize| -> f32 {
+        (0..velocities.nrows())
+            .map(|k| jacobian[(r, k)] * velocities[k])
+            .sum()
+    };
+    Some((Vec3::new(v(0), v(1), v(2)), Vec3::new(v(3), v(4), v(5))))
 }
 
 #[cfg(test)]

@@ -61,19 +61,18 @@ pub enum CouplingMethod {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum LegYield {
-    /// Its own mass, as a free body: the more stable, but a leg carrying a load `F` creeps into
-    /// the sand at about `F dt / m_leg`, so sinkage and speed follow the step.
+    /// Its own mass, as a free body (kept for comparison): a leg carrying a load `F` creeps
+    /// into the sand at about `F dt / m_leg`, so sinkage and speed follow the step.
     Leg,
-    /// The whole robot's inertia, all links as one rigid body: no creep, but a leg pushes the
-    /// sand as if its motor could hold any torque, and every leg shape but the C-leg blows up
-    /// (`docs/speed-vs-accuracy.md`, "The leg that yields with the robot").
+    /// The whole robot's inertia, all links as one rigid body (kept for comparison): a leg
+    /// pushes the sand as if its motor could hold any torque (`docs/speed-vs-accuracy.md`,
+    /// "The leg that yields with the robot").
     Robot,
     /// The inertia the robot's multibody presents at the leg, its joints free
     /// ([`articulated::operational_space_inertia`]): the robot's along the directions the hip
-    /// holds, the leg's own about the hinge. Experimental: with the load predicted
-    /// ([`LoadPrediction::LastSubstep`]) the C-leg robot no longer creeps, but straight legs
-    /// still blow up at landing (`docs/speed-vs-accuracy.md`, "The leg that yields as its
-    /// multibody presents it").
+    /// holds, the leg's own about the hinge. The scenes' default; with the load predicted
+    /// ([`LoadPrediction::LastSubstep`]) the C-leg robot no longer creeps
+    /// (`docs/speed-vs-accuracy.md`, "The leg that yields as its multibody presents it").
     Articulated,
 }
 

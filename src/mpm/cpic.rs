@@ -14,8 +14,9 @@
 //!   on different sides of it. P2G skips incompatible nodes and hands the momentum the particle
 //!   would have exchanged there to the collider; G2P reads a ghost velocity there instead (the
 //!   particle's own velocity, friction-projected against the collider's surface velocity);
-//! - a particle found slightly on the wrong side is pushed back, its inward relative velocity
-//!   removed, and the reaction goes to the collider.
+//! - a particle found slightly on the wrong side is put back on the surface; against a collider
+//!   that does not yield, its inward relative velocity is also removed and the reaction goes to
+//!   the collider (against one that yields, the next exchange carries that momentum).
 
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
@@ -194,7 +195,7 @@ impl ColliderMotion {
     /// a creep that grows with the step (`docs/physics.md`, CPIC step 7).
     ///
     /// With no sand met the motion stays the collider's own, without the kick: nothing is
-    /// exchanged, and the push-back then uses the body's velocity at the substep's start.
+    /// exchanged.
     pub fn yielded(&self, p2g: Option<&ColliderImpulse>) -> ColliderMotion {
         let Some(body) = self.yield_inertia.filter(YieldInertia::is_valid) else {
             return *self;
@@ -280,6 +281,24 @@ impl ColliderImpulse {
     pub fn add_at(&mut self, j: Vector3<f32>, x: &Vector3<f32>, centre: &Vector3<f32>) {
         self.linear_n_s += j.cast::<f64>();
         self.angular_n_m_s += (x - centre).cross(&j).cast::<f64>();
+    }
+
+    /// Adds sand of mass `mass_kg` met at `x` (m) with momentum `momentum` (N s), to a
+    /// collider centred at `centre` (m): its momentum as an impulse at `x`, its mass, first
+    /// moment and inertia to the sand met.
+    #[inline]
+    pub fn add_sand(
+        &mut self,
+        mass_kg: f32,
+        momentum: Vector3<f32>,
+        x: &Vector3<f32>,
+        centre: &Vector3<f32>,
+    ) {
+        self.add_at(momentum, x, centre);
+        self.sand_mass_kg += mass_kg as f64;
+        let (m, arm) = (mass_kg as f64, (x - centre).cast::<f64>());
+        self.sand_first_moment += arm * m;
+        self.sand_inertia += (Matrix3::identity() * arm.norm_squared() - arm * arm.transpose()) * m;
     }
 }
 

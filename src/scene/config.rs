@@ -417,14 +417,15 @@ pub struct CouplingConfig {
     /// Coulomb friction coefficient sand-robot (-), legs and body. Default 0.4.
     #[serde(default = "default_sand_friction")]
     pub friction: f32,
-    /// What a leg yields to the sand with within a substep: `leg` (its own mass), `robot`
-    /// (the whole robot as one rigid body) or `articulated` (the inertia the robot's multibody
-    /// presents at the leg; experimental). Default `leg`.
+    /// What a leg yields to the sand with within a substep: `articulated` (the inertia the
+    /// robot's multibody presents at the leg), `leg` (its own mass) or `robot` (the whole robot
+    /// as one rigid body). Default `articulated`.
     #[serde(default = "default_legs_yield_with")]
     pub legs_yield_with: crate::coupling::LegYield,
     /// The velocity the yield takes for a robot link: `none` (its velocity at the start of the
     /// substep) or `last_substep` (plus the change every other load gives it over the substep,
-    /// measured over the last one; needs `legs_yield_with: articulated`). Default `none`.
+    /// measured over the last one; needs `legs_yield_with: articulated`). Default
+    /// `last_substep`.
     #[serde(default = "default_load_prediction")]
     pub load_prediction: crate::coupling::LoadPrediction,
 }
@@ -439,10 +440,10 @@ fn default_sand_friction() -> f32 {
     0.4
 }
 fn default_legs_yield_with() -> crate::coupling::LegYield {
-    crate::coupling::LegYield::Leg
+    crate::coupling::LegYield::Articulated
 }
 fn default_load_prediction() -> crate::coupling::LoadPrediction {
-    crate::coupling::LoadPrediction::None
+    crate::coupling::LoadPrediction::LastSubstep
 }
 
 impl Default for CouplingConfig {

@@ -212,12 +212,7 @@ fn scatter_cpic(
             let x_node = p.x + d * cx.dx;
             let (r, _) = conflict_normal(colour, conflict, p.tags);
             let centre = &cx.colliders[r].centre_m;
-            impulses[r].add_at(contribution, &x_node, centre);
-            impulses[r].sand_mass_kg += (w * p.mass) as f64;
-            let (m, arm) = ((w * p.mass) as f64, (x_node - centre).cast::<f64>());
-            impulses[r].sand_first_moment += arm * m;
-            impulses[r].sand_inertia +=
-                (Matrix3::identity() * arm.norm_squared() - arm * arm.transpose()) * m;
+            impulses[r].add_sand(w * p.mass, contribution, &x_node, centre);
         }
     }
 }
