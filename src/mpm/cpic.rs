@@ -14,9 +14,10 @@
 //!   on different sides of it. P2G skips incompatible nodes and hands the momentum the particle
 //!   would have exchanged there to the collider; G2P reads a ghost velocity there instead (the
 //!   particle's own velocity, friction-projected against the collider's surface velocity);
-//! - a particle found slightly on the wrong side is put back on the surface; against a collider
-//!   that does not yield, its inward relative velocity is also removed and the reaction goes to
-//!   the collider (against one that yields, the next exchange carries that momentum).
+//! - a particle found slightly on the wrong side is put back on the surface and loses its inward
+//!   velocity relative to the collider, whose reaction goes to the collider; against a collider
+//!   that yields, relative to the motion the collider shares with all such particles of the
+//!   substep (`settle_penalty` in `solver/g2p.rs`).
 
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 

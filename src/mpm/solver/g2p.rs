@@ -447,6 +447,8 @@ fn push_back(
     }
     *x_new -= normal * distance;
     let motion = &cx.colliders[r];
+    // (An invalid inertia yields nothing in `ColliderMotion::yielded`: the settled penalty is
+    // then this one.)
     if motion.yield_inertia.is_some() {
         return Some((r, normal));
     }
@@ -489,8 +491,14 @@ struct PenaltyContact {
 /// collider's surface in this substep (`contacts`) and the collider, at the motion it took in
 /// the exchange with its inertia, share one rigid motion ([`ColliderMotion::yielded`]); each
 /// particle then loses its inward velocity relative to that motion, and the collider takes the
-/// reaction. The collider's velocity thus changes by about the motion it shares with them and
-/// never past them. (Stopping each particle against the collider's own motion, as for colliders
+/// reaction. Where the particles approach along one normal, the collider's velocity thus
+/// changes by the motion it shares with them and not past them (unit test below). The shared
+/// motion is not exact otherwise: it counts every contact's whole momentum, separating and
+/// sliding ones included, while only inward normal velocity is then removed, so a contact
+/// moving away fast, or contacts on differently facing parts of the surface, can still move
+/// the collider past some of them (not seen in the robot runs; counting only the approaching
+/// contacts' normal momentum is the next refinement). (Stopping each particle against the
+/// collider's own motion, as for colliders
 /// that do not yield, hands a light leg the reaction of every particle in full: a few 0.4 g
 /// particles against a 1.3 g leg spun it back past them, the next penalty came from the other
 /// side, several times larger, and the straight-leg robot blew up at landing;
@@ -522,7 +530,8 @@ fn settle_penalty(
         if met.sand_mass_kg == 0.0 {
             continue;
         }
-        // The kick is already in the collider's motion from the exchange.
+        // The kick is in the collider's motion where the exchange met sand; where it met none
+        // the motion is the collider's own, without the kick, as in the old penalty.
         let shared = ColliderMotion {
             load_kick_m_s: Vector3::zeros(),
             load_kick_rad_s: Vector3::zeros(),
