@@ -602,7 +602,14 @@ mod tests {
             load_kick_m_s: Vector3::zeros(),
             load_kick_rad_s: Vector3::zeros(),
         };
-        let offsets = [(0.0, 0.0), (4.0, 0.0), (-4.0, 0.0), (0.0, 4.0), (0.0, -4.0), (3.0, 3.0)];
+        let offsets = [
+            (0.0, 0.0),
+            (4.0, 0.0),
+            (-4.0, 0.0),
+            (0.0, 4.0),
+            (0.0, -4.0),
+            (3.0, 3.0),
+        ];
         let mut position: Vec<Vector3<f32>> = offsets
             .iter()
             .map(|&(y, z)| Vector3::new(1.0e-3, y * 1.0e-3, z * 1.0e-3))
@@ -630,11 +637,17 @@ mod tests {
             .iter()
             .map(|v| (v * particle_kg).cast::<f64>())
             .sum();
-        assert!((sand_momentum + j).norm() < 1e-9, "momentum kept: {sand_momentum} {j}");
+        assert!(
+            (sand_momentum + j).norm() < 1e-9,
+            "momentum kept: {sand_momentum} {j}"
+        );
         let plate_after = 1.0 + j.x / plate_kg as f64;
         let shared = (plate_kg / (plate_kg + 7.0 * particle_kg)) as f64;
         for v in &velocity {
-            assert!((v.x as f64 - shared).abs() < 1e-3, "particle at {v}, shared {shared}");
+            assert!(
+                (v.x as f64 - shared).abs() < 1e-3,
+                "particle at {v}, shared {shared}"
+            );
         }
         assert!(
             (plate_after - shared).abs() < 1e-3,
