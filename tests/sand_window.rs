@@ -120,11 +120,18 @@ fn a_leg_ploughing_the_bed_meets_the_same_sand_in_the_window() {
 const WALK_S: f64 = 1.5;
 /// The window's reach behind the robot's centre (m), as in [`WINDOW`].
 const WINDOW_BEHIND_M: f64 = 0.1;
-// The robot's speed over this run is no test of the window: from the start it is chaotic,
-// 0.114 +- 0.054 m/s over 5 starts 7 um apart (0.057 to 0.195; 2026-12-04, sixth session, the
-// legs yielding as the multibody presents them), and as spread on the whole bed (0.172 and
-// 0.062 at the first two starts). What the window must do is follow the robot: the test
-// checks that the window moved and that it holds the robot with its reach behind.
+/// Slowest the C-leg robot may walk over that run (m/s), from the start, as before
+/// 2026-12-04. Measured (sixth session, the legs yielding as the multibody presents them, 5
+/// starts 7 um apart, a build whose last bits differed): 0.114 +- 0.054 m/s (0.057 to 0.195),
+/// as spread on the whole bed (0.172, 0.062, 0.063 at the first three starts); this test's
+/// start walks 0.094 m/s with the present build. The bound is 1.2 spreads below it and 1.6
+/// below the mean: weak; the run is deterministic across machines
+/// (`tests/determinism.rs`), but a change of the coupling can move this start anywhere in the
+/// spread. The window's own checks (it moved, it holds the robot with its reach behind) do not
+/// depend on the speed.
+const WALK_SPEED_BOUND_M_S: f64 = 0.03;
+/// Spread of that speed over starts (m/s), for the printed margin.
+const WALK_SPEED_SPREAD_M_S: f64 = 0.054;
 
 #[test]
 fn robot_walks_in_a_window_that_follows_it() {
@@ -151,6 +158,15 @@ fn robot_walks_in_a_window_that_follows_it() {
         summary["particles"],
         m["sand_added"],
         m["sand_dropped"]
+    );
+    let speed = number("mean_speed_m_s");
+    eprintln!(
+        "walking speed {speed:.4} m/s: {:.1} spreads above the bound {WALK_SPEED_BOUND_M_S}",
+        (speed - WALK_SPEED_BOUND_M_S) / WALK_SPEED_SPREAD_M_S
+    );
+    assert!(
+        speed > WALK_SPEED_BOUND_M_S,
+        "the robot must walk in the window: {m}"
     );
     assert!(
         number("sand_added") > 0.0 && number("sand_dropped") > 0.0,

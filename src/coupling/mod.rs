@@ -741,7 +741,6 @@ fn world_aabb(pose: &Pose, (min, max): ([f32; 3], [f32; 3])) -> (Vector3<f32>, V
     (lo, hi)
 }
 
-/// A rapier 3x3 matrix in f64 nalgebra.
 /// A body's inertia tensor about its centre of mass in world axes (kg m^2).
 fn world_inertia(rb: &RigidBody) -> Matrix3<f64> {
     let rotation = to_na_matrix(Mat3::from_quat(*rb.rotation()));
@@ -753,6 +752,7 @@ fn world_inertia(rb: &RigidBody) -> Matrix3<f64> {
     rotation * local * rotation.transpose()
 }
 
+/// A rapier 3x3 matrix in f64 nalgebra.
 fn to_na_matrix(m: Mat3) -> Matrix3<f64> {
     Matrix3::from_fn(|r, c| m.col(c)[r] as f64)
 }
