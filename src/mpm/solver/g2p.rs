@@ -18,7 +18,7 @@ use crate::mpm::cpic::{
 use crate::mpm::grid::{node_in_arena, ArenaSlot, Block, ParticleBlock, SparseGrid, ARENA_NODES};
 use crate::mpm::kernel::{Kernel, Stencil};
 use crate::mpm::particles::Particles;
-use crate::mpm::simd::F4;
+use crate::mpm::simd::{Lanes, Wide, WithLanes, F4};
 
 impl Solver {
     /// G2P over the awake particle blocks: velocity, velocity gradient (kept in
@@ -48,13 +48,20 @@ impl Solver {
             kernel: self.settings.kernel,
         };
         let blocks = &self.grid.particle_blocks;
+        let instruction_set = self.instruction_set;
         self.velocity_gradient
             .resize(self.particles.len(), Matrix3::zeros());
         let views = G2pView::split(&mut self.particles, &mut self.velocity_gradient, blocks);
         let per_block: Vec<_> = views
             .into_par_iter()
             .zip(blocks.par_iter())
-            .map(|(view, pb)| grid_to_particle_block(&context, view, pb))
+            .map(|(view, pb)| {
+                instruction_set.dispatch(G2pBlock {
+                    cx: &context,
+                    view,
+                    pb,
+                })
+            })
             .collect();
         let mut impulses = Vec::new();
         let mut contacts = Vec::new();
@@ -179,11 +186,30 @@ impl KeptDeviation {
     }
 }
 
+/// G2P of one particle block, as the work of [`crate::mpm::simd::InstructionSet::dispatch`]: compiled with the
+/// instruction set's features (VEX encoding with AVX2; the same bits, as no product is fused).
+struct G2pBlock<'a> {
+    cx: &'a G2pContext<'a>,
+    view: G2pView<'a>,
+    pb: &'a ParticleBlock,
+}
+
+impl WithLanes for G2pBlock<'_> {
+    type Output = (Vec<ColliderImpulse>, Vec<PenaltyContact>);
+    #[inline(always)]
+    fn run<const N: usize>(self) -> Self::Output
+    where
+        Wide<N>: Lanes,
+    {
+        grid_to_particle_block(self.cx, self.view, self.pb)
+    }
+}
+
 /// G2P of one particle block: loads its 6x6x6 arena of node velocities once, then per particle
 /// gathers v and C (with ghost velocities near colliders), advects, pushes back and clamps.
 /// Returns the CPIC impulses on the colliders (empty where no particle is near one) and the
 /// penalty contacts with colliders that yield, to be settled after G2P.
-#[inline(never)]
+#[inline(always)]
 fn grid_to_particle_block(
     cx: &G2pContext,
     view: G2pView,

@@ -6,14 +6,18 @@
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
-use super::cpic_grid::{add_impulses, CpicParticle, CpicTransfer};
+use super::cpic_grid::{add_impulses, CpicParticle, CpicTransfer, GridColours};
+use super::settings::KeptShares;
 use super::{local_base, scale_columns, CpicBand, Solver, Transfer};
 use crate::mpm::cpic::{
     conflict_normal, conflicts, stencil_nodes, ColliderImpulse, ColliderMotion,
 };
-use crate::mpm::grid::{node_in_arena, ArenaSlot, Block, ParticleBlock, ARENA_NODES, BLOCK_NODES};
-use crate::mpm::kernel::Stencil;
-use crate::mpm::simd::F4;
+use crate::mpm::grid::{
+    node_in_arena, ArenaSlot, Block, ParticleBlock, SparseGrid, ARENA_NODES, BLOCK_NODES,
+};
+use crate::mpm::kernel::{Kernel, Stencil};
+use crate::mpm::particles::Particles;
+use crate::mpm::simd::{Lanes, Wide, WithLanes, F4};
 
 impl Solver {
     /// P2G: each particle block scatters into a private 6x6x6 arena, and arenas are added to the
@@ -49,11 +53,22 @@ impl Solver {
         // Q_p = -dt V_p tau_p D^-1 + m_p C_p, applied to offsets measured in cells (D^-1 =
         // 4/dx^2 for the quadratic B-spline).
         let stress_scale = -dt / (dx * dx) * dx;
-        let kernel = self.settings.kernel;
-        let particles = &self.particles;
-        let colours = &self.colours;
         let grid_blocks = SharedBlocks::new(&mut self.grid.blocks);
-        let slots = &self.arena_slots;
+        let context = P2gContext {
+            grid: &self.grid,
+            particles: &self.particles,
+            colours: &self.colours,
+            colliders,
+            slots: &self.arena_slots,
+            grid_blocks: &grid_blocks,
+            transferred_blocks: transferred_blocks.as_ref(),
+            dx,
+            stress_scale,
+            shares,
+            band_as_bulk,
+            kernel: self.settings.kernel,
+        };
+        let instruction_set = self.instruction_set;
         let mut impulses = Vec::new();
         for phase in 0..8 {
             let phase_impulses: Vec<Vec<ColliderImpulse>> = self
@@ -61,74 +76,7 @@ impl Solver {
                 .particle_blocks
                 .par_iter()
                 .filter(|pb| pb.phase() == phase)
-                .map(|pb| {
-                    let mut arena = [F4::splat(0.0); ARENA_NODES];
-                    let mut transferred_arena = transferred_blocks
-                        .as_ref()
-                        .map(|_| [F4::splat(0.0); ARENA_NODES]);
-                    let colour_arena = colours.arena(pb, slots);
-                    let mut block_impulses = Vec::new();
-                    for p in pb.start..pb.end {
-                        let x = particles.position[p];
-                        let s = Stencil::of(kernel, self.grid.to_grid(&x));
-                        let m = particles.mass[p];
-                        let momentum = particles.velocity[p] * m;
-                        let q_transfer = particles.affine[p] * (m * dx);
-                        let q_cells = scale_columns(
-                            &particles.stress[p],
-                            &(s.inverse_moment * stress_scale * particles.volume[p]),
-                        ) + q_transfer;
-                        let base = local_base(&s, pb);
-                        let tags = particles.cpic_tags[p];
-                        match &colour_arena {
-                            Some(colour) if tags != 0 => {
-                                block_impulses.resize(colliders.len(), ColliderImpulse::default());
-                                let particle = CpicParticle {
-                                    x,
-                                    v: particles.velocity[p],
-                                    mass: m,
-                                    tags,
-                                };
-                                let cx = CpicTransfer {
-                                    colours: &colour[..],
-                                    colliders,
-                                    dx,
-                                };
-                                scatter_cpic(
-                                    &mut arena,
-                                    transferred_arena
-                                        .as_mut()
-                                        .filter(|_| band_as_bulk)
-                                        .map(|t| (t, &q_transfer, shares.band)),
-                                    &cx,
-                                    &s,
-                                    base,
-                                    &particle,
-                                    &q_cells,
-                                    &mut block_impulses,
-                                );
-                            }
-                            _ => {
-                                scatter(&mut arena, &s, base, m, momentum, &q_cells);
-                                if let Some(transferred) = &mut transferred_arena {
-                                    let b = shares.bulk;
-                                    let (m, momentum) = (m * b, momentum * b);
-                                    scatter(transferred, &s, base, m, momentum, &(q_transfer * b));
-                                }
-                            }
-                        }
-                    }
-                    // SAFETY: blocks of one phase have disjoint arenas (see
-                    // `ParticleBlock::phase`), so these blocks are written by no other task; the
-                    // transferred velocities are laid out like the grid's blocks.
-                    unsafe { grid_blocks.add_arena(&arena, pb, slots) };
-                    if let (Some(blocks), Some(transferred)) =
-                        (&transferred_blocks, &transferred_arena)
-                    {
-                        unsafe { blocks.add_arena(transferred, pb, slots) };
-                    }
-                    block_impulses
-                })
+                .map(|pb| instruction_set.dispatch(P2gBlock { cx: &context, pb }))
                 .filter(|i| !i.is_empty())
                 .collect();
             for block in &phase_impulses {
@@ -137,6 +85,129 @@ impl Solver {
         }
         impulses
     }
+}
+
+/// What P2G reads besides the particle block, and the grids it adds to.
+struct P2gContext<'a> {
+    grid: &'a SparseGrid,
+    particles: &'a Particles,
+    colours: &'a GridColours,
+    colliders: &'a [ColliderMotion],
+    slots: &'a [ArenaSlot; ARENA_NODES],
+    grid_blocks: &'a SharedBlocks,
+    /// AFLIP's transferred grid, or none (APIC, PIC).
+    transferred_blocks: Option<&'a SharedBlocks>,
+    /// Grid spacing (m).
+    dx: f32,
+    /// `-dt / dx` (s/m): the stress term's factor for offsets in cells.
+    stress_scale: f32,
+    /// Shares of a particle's deviation kept this substep (AFLIP).
+    shares: KeptShares,
+    band_as_bulk: bool,
+    kernel: Kernel,
+}
+
+/// P2G of one particle block, as the work of [`crate::mpm::simd::InstructionSet::dispatch`]: compiled with the
+/// instruction set's features (VEX encoding with AVX2; the same bits, as no product is fused).
+struct P2gBlock<'a> {
+    cx: &'a P2gContext<'a>,
+    pb: &'a ParticleBlock,
+}
+
+impl WithLanes for P2gBlock<'_> {
+    type Output = Vec<ColliderImpulse>;
+    #[inline(always)]
+    fn run<const N: usize>(self) -> Self::Output
+    where
+        Wide<N>: Lanes,
+    {
+        particle_to_grid_block(self.cx, self.pb)
+    }
+}
+
+/// P2G of one particle block into its private 6x6x6 arena (and AFLIP's), then added to the
+/// grid's blocks it covers. Returns the momentum the colliders took (empty where no particle is
+/// near one).
+#[inline(always)]
+fn particle_to_grid_block(cx: &P2gContext, pb: &ParticleBlock) -> Vec<ColliderImpulse> {
+    let P2gContext {
+        grid,
+        particles,
+        colours,
+        colliders,
+        slots,
+        grid_blocks,
+        transferred_blocks,
+        dx,
+        stress_scale,
+        shares,
+        band_as_bulk,
+        kernel,
+    } = *cx;
+    let mut arena = [F4::splat(0.0); ARENA_NODES];
+    let mut transferred_arena = transferred_blocks
+        .as_ref()
+        .map(|_| [F4::splat(0.0); ARENA_NODES]);
+    let colour_arena = colours.arena(pb, slots);
+    let mut block_impulses = Vec::new();
+    for p in pb.start..pb.end {
+        let x = particles.position[p];
+        let s = Stencil::of(kernel, grid.to_grid(&x));
+        let m = particles.mass[p];
+        let momentum = particles.velocity[p] * m;
+        let q_transfer = particles.affine[p] * (m * dx);
+        let q_cells = scale_columns(
+            &particles.stress[p],
+            &(s.inverse_moment * stress_scale * particles.volume[p]),
+        ) + q_transfer;
+        let base = local_base(&s, pb);
+        let tags = particles.cpic_tags[p];
+        match &colour_arena {
+            Some(colour) if tags != 0 => {
+                block_impulses.resize(colliders.len(), ColliderImpulse::default());
+                let particle = CpicParticle {
+                    x,
+                    v: particles.velocity[p],
+                    mass: m,
+                    tags,
+                };
+                let cx = CpicTransfer {
+                    colours: &colour[..],
+                    colliders,
+                    dx,
+                };
+                scatter_cpic(
+                    &mut arena,
+                    transferred_arena
+                        .as_mut()
+                        .filter(|_| band_as_bulk)
+                        .map(|t| (t, &q_transfer, shares.band)),
+                    &cx,
+                    &s,
+                    base,
+                    &particle,
+                    &q_cells,
+                    &mut block_impulses,
+                );
+            }
+            _ => {
+                scatter(&mut arena, &s, base, m, momentum, &q_cells);
+                if let Some(transferred) = &mut transferred_arena {
+                    let b = shares.bulk;
+                    let (m, momentum) = (m * b, momentum * b);
+                    scatter(transferred, &s, base, m, momentum, &(q_transfer * b));
+                }
+            }
+        }
+    }
+    // SAFETY: blocks of one phase have disjoint arenas (see
+    // `ParticleBlock::phase`), so these blocks are written by no other task; the
+    // transferred velocities are laid out like the grid's blocks.
+    unsafe { grid_blocks.add_arena(&arena, pb, slots) };
+    if let (Some(blocks), Some(transferred)) = (&transferred_blocks, &transferred_arena) {
+        unsafe { blocks.add_arena(transferred, pb, slots) };
+    }
+    block_impulses
 }
 
 /// Adds one particle's mass and momentum `w_ip (m_p v_p + Q_p (x_i - x_p))` to its 27 arena
