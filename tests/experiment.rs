@@ -54,6 +54,15 @@ const MAX_C_LEG_TILT_DEG: f64 = 60.0;
 /// reversed, per-cycle C - reversed, C-leg tilt; for the printed margins.
 const MPM_SPREADS: [f64; 4] = [0.019, 0.019, 0.024, 4.8];
 
+/// The settings this file's figures were measured with, beside dx = 1.25 cm: CFL 0.4, the whole
+/// bed, all sand awake, as `config/experiments/leg_curvature.yaml` runs (the shipped scene's
+/// cheaper settings since 2026-12-04 were measured at dx = 1 cm only).
+const MEASURED_WITH: [&str; 3] = [
+    "sand.solver.cfl=0.4",
+    "sand.window=null",
+    "sand.solver.sleep=null",
+];
+
 /// Runs the C-leg/reversed-leg sweep on `model` into `out` and returns results.json.
 fn c_versus_reversed(model: &str, out: &Path) -> Value {
     let file = out.with_extension("yaml");
@@ -62,12 +71,13 @@ fn c_versus_reversed(model: &str, out: &Path) -> Value {
         format!(
             "name: c_vs_reversed_{model}\n\
              base_scene: config/robot_on_sand.yaml\n\
-             overrides: [sand.dx_m=0.0125, terrain.rft.zeta_n_m3={POPPY_SEEDS_ZETA_N_M3}]\n\
+             overrides: [sand.dx_m=0.0125, {}, terrain.rft.zeta_n_m3={POPPY_SEEDS_ZETA_N_M3}]\n\
              curvatures_per_r: [-1, 1]\n\
              frequencies_hz: [2]\n\
              terrain_models: [{model}]\n\
              settle_s: 0.5\n\
-             cycles: {CYCLES}\n"
+             cycles: {CYCLES}\n",
+            MEASURED_WITH.join(", ")
         ),
     )
     .unwrap();
@@ -294,11 +304,12 @@ fn straight_legs_land_and_walk_at_2_hz() {
     let mut params = sandstep::robot::HexapodParams::default();
     params.legs.curvature_per_m = 0.0;
     sandstep::robot::write_hexapod_urdf(&params, &urdf).unwrap();
-    let overrides = [
+    let mut overrides = vec![
         "sand.dx_m=0.0125".to_string(),
         "robot.gait.frequency_hz=2".to_string(),
         format!("robot.urdf={}", urdf.display()),
     ];
+    overrides.extend(MEASURED_WITH.map(String::from));
     let scene =
         sandstep::scene::Scene::load(Path::new("config/robot_on_sand.yaml"), &overrides).unwrap();
     let mut sim = sandstep::scene::Simulation::new(&scene).unwrap();
