@@ -32,7 +32,7 @@ fn steps_with_robot_max_dt(max_dt_s: Option<f64>, duration_s: f64) -> u64 {
 fn the_robot_step_bounds_the_sand_substep() {
     let duration_s = 0.01;
     let free = steps_with_robot_max_dt(None, duration_s);
-    // The sand's own step (CFL) is about 0.1 ms here: 1 ms does not bind.
+    // The sand's own step (CFL) is about 0.3 ms here: 1 ms does not bind.
     assert!(free < 200, "{free} substeps in {duration_s} s");
     let bound_s = 2.5e-5;
     let bound = steps_with_robot_max_dt(Some(bound_s), duration_s);

@@ -514,7 +514,7 @@ mod tests {
             &[
                 "cycles=2",
                 "terrain_models=[mpm]",
-                "overrides.0=sand.dx_m=0.02",
+                "overrides.0=sand.dx_m=0.025",
             ],
         );
         // `overrides.0` on an absent list: the parent is created as a map, which is rejected.
@@ -524,13 +524,13 @@ mod tests {
             &[
                 "cycles=2",
                 "terrain_models=[mpm]",
-                "overrides.0=sand.dx_m=0.02",
+                "overrides.0=sand.dx_m=0.025",
             ],
         )
         .unwrap();
         assert_eq!(e.config.cycles, 2);
         assert_eq!(e.config.terrain_models, [TerrainModel::Mpm]);
-        assert_eq!(e.config.overrides, ["sand.dx_m=0.02"]);
+        assert_eq!(e.config.overrides, ["sand.dx_m=0.025"]);
     }
 
     #[test]

@@ -65,8 +65,11 @@ impl Scene {
                 walls: WallsConfig::all(slip),
             },
             dx_m: c.dx_m,
+            // All sand awake: a sleeping block is a rigid support, which would stiffen the
+            // bed under the plate; the scene's other solver settings are kept.
             solver: SolverConfig {
                 fixed_dt_s: None,
+                sleep: None,
                 ..sand.solver.clone()
             },
             materials: [(material.clone(), sand.materials[&material].clone())].into(),
