@@ -186,10 +186,12 @@ impl KeptDeviation {
     }
 }
 
-/// G2P of one particle block, as the work of [`crate::mpm::simd::InstructionSet::dispatch`]: compiled with the
-/// instruction set's features (VEX encoding with AVX2; the same bits, as no product is fused).
-/// Only what is inlined gets them: the CPIC band's `gather_cpic`, `gather_compatible` and `push_back` (`#[inline(never)]`)
-/// stay compiled for the baseline.
+/// G2P of one particle block, as the work of [`crate::mpm::simd::InstructionSet::dispatch`]:
+/// compiled with the instruction set's features (VEX encoding with AVX2; the same bits, as no
+/// product is fused).
+/// Only what is inlined gets them: the CPIC band's `gather_cpic`, `gather_compatible` and
+/// `push_back` (`#[inline(never)]`) stay compiled for the baseline; inlined, they changed the
+/// shipped scene's wall time by 0.99 (0.98-1.04), 5 pairs.
 struct G2pBlock<'a> {
     cx: &'a G2pContext<'a>,
     view: G2pView<'a>,

@@ -107,10 +107,11 @@ struct P2gContext<'a> {
     kernel: Kernel,
 }
 
-/// P2G of one particle block, as the work of [`crate::mpm::simd::InstructionSet::dispatch`]: compiled with the
-/// instruction set's features (VEX encoding with AVX2; the same bits, as no product is fused).
-/// Only what is inlined gets them: the CPIC band's `scatter_cpic` (`#[inline(never)]`)
-/// stay compiled for the baseline.
+/// P2G of one particle block, as the work of [`crate::mpm::simd::InstructionSet::dispatch`]:
+/// compiled with the instruction set's features (VEX encoding with AVX2; the same bits, as no
+/// product is fused).
+/// Only what is inlined gets them: the CPIC band's `scatter_cpic` (`#[inline(never)]`) stays
+/// compiled for the baseline.
 struct P2gBlock<'a> {
     cx: &'a P2gContext<'a>,
     pb: &'a ParticleBlock,
