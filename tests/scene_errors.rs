@@ -216,3 +216,70 @@ fn terrain_values_out_of_range() {
         assert_names(&error_of(text, &[set]), &["scenes/test.yaml", field]);
     }
 }
+
+/// A robot started beyond the sand is rejected at load time, naming the coordinate (issue 22:
+/// it used to panic at t = 0 where the sand window's walls met). On RFT ground there is no
+/// sand domain to start over.
+#[test]
+fn a_robot_starting_off_the_sand() {
+    let robot_scene = include_str!("../config/robot_on_sand.yaml");
+    for (set, field, value) in [
+        (
+            "robot.initial_pose.position_m=[1.9, 0.0]",
+            "position_m[0]",
+            "1.9",
+        ),
+        (
+            "robot.initial_pose.position_m=[-0.5, 0.0]",
+            "position_m[0]",
+            "-0.5",
+        ),
+        (
+            "robot.initial_pose.position_m=[0.0, 0.2]",
+            "position_m[1]",
+            "0.2",
+        ),
+    ] {
+        assert_names(
+            &error_of(robot_scene, &[set]),
+            &[
+                "scenes/test.yaml",
+                "robot.initial_pose.",
+                field,
+                value,
+                "sand domain",
+            ],
+        );
+        for window in ["sand.window=null", "terrain.model=rft"] {
+            let overrides: Vec<String> = [set, window].iter().map(|s| s.to_string()).collect();
+            let loaded = Scene::from_yaml(robot_scene, Path::new("scenes/test.yaml"), &overrides);
+            assert_eq!(
+                loaded.is_ok(),
+                window == "terrain.model=rft",
+                "{set} {window}"
+            );
+        }
+    }
+}
+
+/// The motor's impedance joins the inertia the multibody presents at a leg: with another leg
+/// yield it is refused, naming the field.
+#[test]
+fn motor_impedance_needs_the_articulated_leg() {
+    let e = error_of(
+        SCENE,
+        &[
+            "coupling.legs_yield_with=leg",
+            "coupling.load_prediction=none",
+            "coupling.motor_impedance=true",
+        ],
+    );
+    assert_names(
+        &e,
+        &[
+            "scenes/test.yaml",
+            "coupling.motor_impedance",
+            "articulated",
+        ],
+    );
+}

@@ -156,6 +156,9 @@ pub struct Coupling {
     load_prediction: LoadPrediction,
     /// Multibody links yield with the inertia their multibody presents at them.
     articulated: bool,
+    /// With articulation, the motors' impedance over the step joins it: rapier's solver
+    /// substeps per step ([`Self::with_motor_impedance`]).
+    motor_substeps: Option<usize>,
     /// The two-way bodies' last substep (with [`LoadPrediction::LastSubstep`]).
     history: Vec<BodyHistory>,
 }
@@ -194,6 +197,7 @@ impl Coupling {
             load_prediction: LoadPrediction::None,
             history: Vec::new(),
             articulated: false,
+            motor_substeps: None,
         })
     }
 
@@ -238,6 +242,16 @@ impl Coupling {
     pub fn with_articulation(self) -> Self {
         Coupling {
             articulated: true,
+            ..self
+        }
+    }
+
+    /// The same colliders, with an articulated link also yielding with the impedance its
+    /// multibody's motors present over the step ([`articulated::motor_impedances`]; rapier
+    /// solves the step in `solver_substeps` substeps).
+    pub fn with_motor_impedance(self, solver_substeps: usize) -> Self {
+        Coupling {
+            motor_substeps: Some(solver_substeps),
             ..self
         }
     }
@@ -324,9 +338,10 @@ impl Coupling {
             .colliders
             .iter()
             .map(|c| {
-                joints
-                    .filter(|_| self.articulated)
-                    .and_then(|j| articulated::operational_space_inertia(j, c.body))
+                joints.filter(|_| self.articulated).and_then(|j| {
+                    let motors = self.motor_substeps.map(|n| (dt, n));
+                    articulated::operational_space_inertia(j, c.body, motors)
+                })
             })
             .collect();
         let yield_inertias: Vec<Option<YieldInertia>> = self

@@ -8,6 +8,7 @@ use crate::mpm::material::{Constitutive, DruckerPrager, FixedCorotated, Lame};
 use crate::mpm::{
     NewParticle, SleepSettings, Solver, SolverMaterial, SolverSettings, TimeStep, Walls,
 };
+use crate::terrain::TerrainModel;
 
 /// Checks ranges and references; errors name the file and the field.
 // Negated comparisons (`!(a < b)`) on purpose: they reject NaN too.
@@ -56,6 +57,15 @@ pub fn validate(scene: &Scene) -> Result<(), SceneError> {
              stiff spring: docs/physics.md, CPIC step 7)",
         ));
     }
+    if c.coupling.motor_impedance
+        && c.coupling.legs_yield_with != crate::coupling::LegYield::Articulated
+    {
+        return Err(scene.invalid(
+            "coupling.motor_impedance",
+            "true needs coupling.legs_yield_with: articulated (the motor's impedance joins the \
+             inertia the multibody presents at the leg)",
+        ));
+    }
     let Some(sand) = scene.sand() else {
         return if c.column_collapse.is_some() {
             Err(scene.invalid(
@@ -69,6 +79,27 @@ pub fn validate(scene: &Scene) -> Result<(), SceneError> {
     positive("sand.dx_m", sand.dx_m as f64)?;
     if let Some(window) = &sand.window {
         super::sand_window::validate(scene, window, sand.dx_m)?;
+    }
+    if let Some(robot) = c
+        .robot
+        .as_ref()
+        .filter(|_| c.terrain.model == TerrainModel::Mpm)
+    {
+        let start = robot.initial_pose.position_m;
+        for axis in 0..2 {
+            let (lo, hi) = (sand.domain.min_m[axis], sand.domain.max_m[axis]);
+            if !((lo as f64)..=(hi as f64)).contains(&start[axis]) {
+                return Err(scene.invalid(
+                    format!("robot.initial_pose.position_m[{axis}]"),
+                    format!(
+                        "{} m lies outside the sand domain, {lo} to {hi} m along {} \
+                         (sand.domain): the robot must start over the sand",
+                        start[axis],
+                        ["x", "y"][axis]
+                    ),
+                ));
+            }
+        }
     }
     for axis in 0..3 {
         let (lo, hi) = (sand.domain.min_m[axis], sand.domain.max_m[axis]);

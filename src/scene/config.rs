@@ -428,6 +428,11 @@ pub struct CouplingConfig {
     /// `last_substep`.
     #[serde(default = "default_load_prediction")]
     pub load_prediction: crate::coupling::LoadPrediction,
+    /// With `legs_yield_with: articulated`, a leg also yields with the impedance its motor
+    /// presents over the step (rapier answers the sand with the motor within the step).
+    /// Default false.
+    #[serde(default)]
+    pub motor_impedance: bool,
 }
 
 fn default_method() -> crate::coupling::CouplingMethod {
@@ -455,6 +460,7 @@ impl Default for CouplingConfig {
             friction: default_sand_friction(),
             legs_yield_with: default_legs_yield_with(),
             load_prediction: default_load_prediction(),
+            motor_impedance: false,
         }
     }
 }

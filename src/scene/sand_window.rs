@@ -67,6 +67,10 @@ pub fn validate(scene: &Scene, window: &SandWindowConfig, dx_m: f32) -> Result<(
     Ok(())
 }
 
+/// Steps (a fraction of one) within which a window end counts as on a step: float rounding of
+/// lengths that are whole numbers of steps.
+const STEP_ROUNDING_TOLERANCE: f32 = 1e-3;
+
 /// The window's state: where its ends are, and what it has added and dropped.
 #[derive(Clone, Debug)]
 pub struct SandWindow {
@@ -109,16 +113,29 @@ impl SandWindow {
         window
     }
 
-    /// Back and front of the window for a robot at `robot_x_m`, on whole steps.
+    /// Back and front of the window for a robot at `robot_x_m`, on whole steps. Near a domain
+    /// end the window stops there, keeping its whole length (`behind_m + ahead_m`) inside the
+    /// domain, or all of a shorter domain: a robot that walks past the end of the bed keeps
+    /// the last window's sand behind it.
     fn target(&self, robot_x_m: f32) -> [f32; 2] {
         let step = self.config.step_m;
+        let [domain_min, domain_max] = self.domain_x_m;
         let on_steps = |x: f32, round: fn(f32) -> f32| {
             (self.origin_x_m + round((x - self.origin_x_m) / step) * step)
-                .clamp(self.domain_x_m[0], self.domain_x_m[1])
+                .clamp(domain_min, domain_max)
         };
+        let length = self.config.behind_m + self.config.ahead_m;
+        let back = on_steps(robot_x_m - self.config.behind_m, f32::floor);
+        let front = on_steps(robot_x_m + self.config.ahead_m, f32::ceil);
+        // The length in whole steps, rounded to the nearer step where float rounding leaves it
+        // a hair off one (0.35 m / 0.05 m = 7.0000005).
         [
-            on_steps(robot_x_m - self.config.behind_m, f32::floor),
-            on_steps(robot_x_m + self.config.ahead_m, f32::ceil),
+            back.min(on_steps(domain_max - length, |s| {
+                (s + STEP_ROUNDING_TOLERANCE).floor()
+            })),
+            front.max(on_steps(domain_min + length, |s| {
+                (s - STEP_ROUNDING_TOLERANCE).ceil()
+            })),
         ]
     }
 
@@ -218,6 +235,39 @@ mod tests {
         assert!(!window.follow(&mut solver, 0.0));
         assert!(!window.follow(&mut solver, 0.21));
         assert_eq!(window.x_m, [back, front]);
+    }
+
+    /// A robot that walks to the end of the bed, or past it, or starts behind its beginning,
+    /// leaves the window at the domain's end with its whole length: the walls never meet
+    /// (issue 22: the track with a short domain panicked at t = 2.96 s).
+    #[test]
+    fn the_window_stops_at_the_domains_ends() {
+        let scene = scene(&[WINDOW]).unwrap();
+        let mut solver = scene.build_solver().unwrap();
+        let config = scene.sand().unwrap().window.unwrap();
+        let mut window = SandWindow::new(&scene, config, &mut solver, 0.0);
+        // The bed runs from -0.12 to 0.8 m; the window is 0.3 m long, on 0.05 m steps.
+        for robot_x_m in [0.7, 0.8, 0.95, 5.0] {
+            window.follow(&mut solver, robot_x_m);
+            let [back, front] = window.x_m;
+            assert!(
+                (front - 0.8).abs() < 1e-6 && (back - 0.48).abs() < 1e-6,
+                "robot at {robot_x_m} m: {:?}",
+                window.x_m
+            );
+            assert_eq!(solver.x_walls_m(), window.x_m);
+            assert!(solver.particles.position.iter().all(|x| x.x >= back));
+        }
+        let mut solver = scene.build_solver().unwrap();
+        let behind = SandWindow::new(&scene, config, &mut solver, -1.0);
+        let [back, front] = behind.x_m;
+        let length = front - back;
+        assert!(
+            (back + 0.12).abs() < 1e-6 && (0.3 - 1e-6..0.35 + 1e-6).contains(&length),
+            "{:?}",
+            behind.x_m
+        );
+        assert!(!solver.particles.is_empty());
     }
 
     #[test]
