@@ -53,12 +53,40 @@ impl Json {
     }
 }
 
-/// `--duration S`, checked to be a positive number of seconds.
+/// `--duration S`, checked to be a finite, positive number of seconds.
 pub fn check_duration(duration_s: Option<f64>) -> anyhow::Result<Option<f64>> {
     if let Some(d) = duration_s {
-        anyhow::ensure!(d > 0.0 && d.is_finite(), "--duration must be > 0 seconds");
+        anyhow::ensure!(
+            d.is_finite(),
+            "--duration {d} must be a finite number of seconds"
+        );
+        anyhow::ensure!(d > 0.0, "--duration {d} must be > 0 seconds");
     }
     Ok(duration_s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each bad duration is told what is wrong with it (issue 22: `inf` was told "> 0").
+    #[test]
+    fn bad_durations_say_what_is_wrong() {
+        let message = |d: f64| check_duration(Some(d)).unwrap_err().to_string();
+        assert!(
+            message(f64::INFINITY).contains("finite"),
+            "{}",
+            message(f64::INFINITY)
+        );
+        assert!(
+            message(f64::NAN).contains("finite"),
+            "{}",
+            message(f64::NAN)
+        );
+        assert!(message(0.0).contains("> 0"), "{}", message(0.0));
+        assert!(message(-1.0).contains("> 0"), "{}", message(-1.0));
+        assert_eq!(check_duration(Some(0.5)).unwrap(), Some(0.5));
+    }
 }
 
 /// Where a run records its bag.

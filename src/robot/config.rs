@@ -253,6 +253,13 @@ impl RobotConfig {
         if self.urdf.as_os_str().is_empty() {
             return Err(fail("urdf", "\"\"".into(), "must name a URDF file"));
         }
+        if self.urdf.is_dir() {
+            return Err(fail(
+                "urdf",
+                self.urdf.display().to_string(),
+                "is a directory; name a URDF file in it (e.g. urdf/hexapod.urdf)",
+            ));
+        }
         if !self.urdf.is_file() {
             return Err(fail(
                 "urdf",
@@ -385,5 +392,13 @@ mod tests {
             msg.contains("robot.urdf = no/such.urdf: file not found"),
             "{msg}"
         );
+
+        // A directory is named as one (issue 22: it was "file not found").
+        let cfg = RobotConfig {
+            urdf: PathBuf::from("urdf"),
+            ..Default::default()
+        };
+        let msg = cfg.validate(Path::new("s.yaml")).unwrap_err().to_string();
+        assert!(msg.contains("robot.urdf = urdf: is a directory"), "{msg}");
     }
 }
