@@ -130,6 +130,21 @@ fn joint_to_a_missing_link_is_named() {
     );
 }
 
+/// A URDF without links is told so (issue 22: it was told "the joints form a loop").
+#[test]
+fn urdf_without_links_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("empty.urdf");
+    std::fs::write(
+        &path,
+        "<?xml version=\"1.0\"?>\n<robot name=\"empty\"></robot>\n",
+    )
+    .unwrap();
+    let (_, msg) = message(load(&path));
+    assert!(msg.contains("has no <link>"), "{msg}");
+    assert!(!msg.contains("loop"), "{msg}");
+}
+
 #[test]
 fn missing_urdf_file_names_it() {
     let (_, msg) = message(load(Path::new("urdf/no_such_robot.urdf")));

@@ -109,6 +109,11 @@ fn check_tree(path: &Path, robot: &Robot) -> Result<String, RobotError> {
         .collect();
     match roots.as_slice() {
         [root] => Ok(root.to_string()),
+        [] if robot.links.is_empty() => Err(invalid(
+            path,
+            "<robot>".into(),
+            "has no <link>: a robot needs at least its body",
+        )),
         [] => Err(invalid(
             path,
             "<robot>".into(),
