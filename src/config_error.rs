@@ -7,12 +7,14 @@ use std::path::{Path, PathBuf};
 /// A file that cannot be used, or an output that cannot be written.
 #[derive(thiserror::Error, Debug)]
 pub enum ConfigError {
-    #[error("cannot read {what} file {}: {source}", file.display())]
+    /// The I/O error is told in the message, not chained as a source, so that a report
+    /// of the error with its causes does not tell it twice.
+    #[error("cannot read {what} file {}: {error}", file.display())]
     Read {
         /// What the file holds (`scene`, `experiment`, `sweep`), for the message.
         what: &'static str,
         file: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
     #[error("{}: {message}", file.display())]
     Parse { file: PathBuf, message: String },
@@ -22,10 +24,11 @@ pub enum ConfigError {
         field: String,
         message: String,
     },
-    #[error("cannot write {}: {source}", path.display())]
+    /// As `Read`, the I/O error is in the message only.
+    #[error("cannot write {}: {error}", path.display())]
     Write {
         path: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
 }
 
@@ -59,18 +62,18 @@ impl FieldError {
 impl ConfigError {
     /// Reads `file` as text; an error names it as a `what` file.
     pub fn read(what: &'static str, file: &Path) -> Result<String, ConfigError> {
-        std::fs::read_to_string(file).map_err(|source| ConfigError::Read {
+        std::fs::read_to_string(file).map_err(|error| ConfigError::Read {
             what,
             file: file.to_path_buf(),
-            source,
+            error,
         })
     }
 
     /// A write error at `path`.
-    pub fn write(path: &Path, source: std::io::Error) -> ConfigError {
+    pub fn write(path: &Path, error: std::io::Error) -> ConfigError {
         ConfigError::Write {
             path: path.to_path_buf(),
-            source,
+            error,
         }
     }
 }

@@ -195,3 +195,16 @@ fn sigterm_stops_a_run_with_its_summary_and_bag() {
     assert_eq!(odom, (sim_time * 100.0).round() as u64 + 1, "{v}");
     assert!(reader.metadata_counts().is_some(), "metadata.yaml written");
 }
+
+/// A scene that cannot be read is told once why (issue 22: a directory repeated "Is a
+/// directory (os error 21)" twice), with the file named and a failing exit code.
+#[test]
+fn an_unreadable_scene_is_told_once() {
+    for scene in ["config", "config/no_such_scene.yaml"] {
+        let out = sandstep(&["run", scene, "--no-bag"]);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{scene}: {stderr}");
+        assert!(stderr.contains(scene), "{scene}: {stderr}");
+        assert_eq!(stderr.matches("os error").count(), 1, "{scene}: {stderr}");
+    }
+}
