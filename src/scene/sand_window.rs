@@ -23,8 +23,9 @@ pub struct SandWindowConfig {
     pub step_m: f32,
 }
 
-/// Relative tolerance of "a whole number of cells".
-const WHOLE_CELLS_TOLERANCE: f32 = 1e-3;
+/// How far a ratio of lengths (the step in cells, the window in steps) may be from a whole
+/// number and still count as one: float rounding (0.35 m / 0.05 m = 7.0000005).
+const WHOLE_NUMBER_TOLERANCE: f32 = 1e-3;
 
 /// Checks `sand.window` of a scene with sand (`dx_m` its grid spacing).
 pub fn validate(scene: &Scene, window: &SandWindowConfig, dx_m: f32) -> Result<(), SceneError> {
@@ -39,7 +40,8 @@ pub fn validate(scene: &Scene, window: &SandWindowConfig, dx_m: f32) -> Result<(
         }
     }
     let cells = window.step_m / dx_m;
-    if cells < 1.0 - WHOLE_CELLS_TOLERANCE || (cells - cells.round()).abs() > WHOLE_CELLS_TOLERANCE
+    if cells < 1.0 - WHOLE_NUMBER_TOLERANCE
+        || (cells - cells.round()).abs() > WHOLE_NUMBER_TOLERANCE
     {
         return Err(scene.invalid(
             field("step_m"),
@@ -66,10 +68,6 @@ pub fn validate(scene: &Scene, window: &SandWindowConfig, dx_m: f32) -> Result<(
     }
     Ok(())
 }
-
-/// Steps (a fraction of one) within which a window end counts as on a step: float rounding of
-/// lengths that are whole numbers of steps.
-const STEP_ROUNDING_TOLERANCE: f32 = 1e-3;
 
 /// The window's state: where its ends are, and what it has added and dropped.
 #[derive(Clone, Debug)]
@@ -128,13 +126,13 @@ impl SandWindow {
         let back = on_steps(robot_x_m - self.config.behind_m, f32::floor);
         let front = on_steps(robot_x_m + self.config.ahead_m, f32::ceil);
         // The length in whole steps, rounded to the nearer step where float rounding leaves it
-        // a hair off one (0.35 m / 0.05 m = 7.0000005).
+        // a hair off one.
         [
             back.min(on_steps(domain_max - length, |s| {
-                (s + STEP_ROUNDING_TOLERANCE).floor()
+                (s + WHOLE_NUMBER_TOLERANCE).floor()
             })),
             front.max(on_steps(domain_min + length, |s| {
-                (s - STEP_ROUNDING_TOLERANCE).ceil()
+                (s - WHOLE_NUMBER_TOLERANCE).ceil()
             })),
         ]
     }
