@@ -55,11 +55,17 @@ fn wait_output(mut child: Child, timeout: Duration) -> std::process::Output {
 }
 
 fn json_line(out: &std::process::Output, what: &str) -> serde_json::Value {
+    json_line_exiting(out, what, 0)
+}
+
+/// The JSON summary of a process that exited with `code` (130 after SIGINT).
+fn json_line_exiting(out: &std::process::Output, what: &str, code: i32) -> serde_json::Value {
     let stdout = String::from_utf8_lossy(&out.stdout);
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        out.status.success(),
-        "{what} failed ({}):\n{stderr}\n{stdout}",
+    assert_eq!(
+        out.status.code(),
+        Some(code),
+        "{what} exited with {} (expected {code}):\n{stderr}\n{stdout}",
         out.status
     );
     serde_json::from_str(stdout.lines().last().unwrap_or_default())
@@ -182,7 +188,8 @@ fn sigint_mid_run_leaves_a_bag_every_reader_opens() {
     std::thread::sleep(Duration::from_secs(8));
     interrupt(&node);
     let out = wait_output(node, Duration::from_secs(60));
-    let summary = json_line(&out, "interrupted sandstep node");
+    // Stopped by SIGINT, its outputs finished: exit code 128 + 2.
+    let summary = json_line_exiting(&out, "interrupted sandstep node", 130);
     let sim_time = summary["sim_time_s"].as_f64().unwrap();
     assert!(sim_time > 0.05, "simulated only {sim_time} s");
 

@@ -7,6 +7,7 @@ mod options;
 pub mod progress;
 mod run;
 mod series;
+mod stop;
 mod tools;
 mod urdf;
 
@@ -49,7 +50,10 @@ enum Command {
 }
 
 /// Parses the command line, runs the command, and prints an error (with its causes) on stderr.
+/// A job stopped by SIGINT or SIGTERM exits with 128 plus the signal once its outputs are
+/// finished (130, 143).
 pub fn main() -> ExitCode {
+    stop::end_quietly_on_closed_pipe();
     let command = Cli::parse().command;
     // A bad SANDSTEP_SIMD is an error here, before any work, not a silent fallback later.
     if let Err(e) = crate::mpm::simd::InstructionSet::from_env() {
@@ -66,11 +70,12 @@ pub fn main() -> ExitCode {
         Command::CalibrateRft(args) => tools::calibrate_rft(args),
         Command::Bench(args) => tools::bench(args),
     };
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            ExitCode::FAILURE
-        }
+    if let Err(e) = &result {
+        eprintln!("error: {e:#}");
+    }
+    match (stop::received_signal(), result) {
+        (Some(signal), _) => ExitCode::from(stop::exit_code(signal)),
+        (None, Ok(())) => ExitCode::SUCCESS,
+        (None, Err(_)) => ExitCode::FAILURE,
     }
 }

@@ -1,9 +1,30 @@
 //! The options several commands share, defined once: worker threads, `--set` overrides,
-//! `--json`, `--duration`, the bag, and the Ctrl-C flag.
+//! `--json`, `--duration` and the bag.
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+
+/// `--max-memory GB`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct MemoryLimit {
+    /// Most memory the sand may take (GB); a scene needing more is refused before anything is
+    /// allocated. Default: what the machine has available.
+    #[arg(long, value_name = "GB")]
+    pub max_memory: Option<f64>,
+}
+
+impl MemoryLimit {
+    /// Holds every scene of this process to the limit, if one was given.
+    pub fn apply(&self) -> anyhow::Result<()> {
+        if let Some(gb) = self.max_memory {
+            anyhow::ensure!(
+                gb.is_finite() && gb > 0.0,
+                "--max-memory {gb}: must be a finite number of GB > 0"
+            );
+            crate::scene::memory::limit_to(gb * crate::scene::memory::BYTES_PER_GB);
+        }
+        Ok(())
+    }
+}
 
 /// Parent of the default bag directories.
 const DEFAULT_BAG_PARENT: &str = "bags";
@@ -110,19 +131,4 @@ impl BagArgs {
             crate::ros::default_bag_dir(Path::new(DEFAULT_BAG_PARENT), scene_name)
         }))
     }
-}
-
-/// A flag set by the first Ctrl-C or SIGTERM, for the job to stop after its current step and
-/// finish its outputs; a second one exits at once.
-pub fn stop_flag() -> anyhow::Result<Arc<AtomicBool>> {
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
-    ctrlc::set_handler(move || {
-        if flag.swap(true, Ordering::SeqCst) {
-            eprintln!("\nstopping now");
-            std::process::exit(130);
-        }
-        eprintln!("\nstopping after this step (again to quit at once)");
-    })?;
-    Ok(stop)
 }

@@ -4,8 +4,9 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 
-use super::options::{check_duration, stop_flag, BagArgs, Json, Overrides, Threads};
+use super::options::{check_duration, BagArgs, Json, MemoryLimit, Overrides, Threads};
 use super::progress::Bars;
+use super::stop::stop_flag;
 use crate::ros::NodeRunOptions;
 use crate::scene::{NoObserver, RunOptions, Scene};
 
@@ -23,6 +24,8 @@ pub struct RunArgs {
     duration: Option<f64>,
     #[command(flatten)]
     threads: Threads,
+    #[command(flatten)]
+    memory: MemoryLimit,
     #[command(flatten)]
     overrides: Overrides,
     /// Output directory for snapshots (default out/<scene name>).
@@ -48,6 +51,8 @@ pub struct NodeArgs {
     #[command(flatten)]
     threads: Threads,
     #[command(flatten)]
+    memory: MemoryLimit,
+    #[command(flatten)]
     overrides: Overrides,
     #[command(flatten)]
     json: Json,
@@ -58,14 +63,16 @@ pub struct NodeArgs {
 /// Runs the scene headless with a progress bar, records its bag (finished on errors too) and
 /// prints the summary.
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
+    let stop = stop_flag()?;
     args.threads.apply()?;
+    args.memory.apply()?;
     let duration_s = check_duration(args.duration)?;
     let scene = Scene::load(&args.scene, &args.overrides.overrides)?;
     let opts = RunOptions {
         duration_s,
         out_dir: args.out,
         progress: Bars::progress(args.json.show_progress()),
-        stop: Some(stop_flag()?),
+        stop: Some(stop),
     };
     let bag_dir = args.bag.dir(&scene.config.name);
     let run = crate::ros::record_run(&scene, &opts, bag_dir.as_deref(), &mut NoObserver)?;
@@ -92,6 +99,16 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         summary.wall_time_per_sim_s,
         summary.particle_steps_per_s
     );
+    if summary.stopped_early {
+        println!(
+            "  stopped early by {} at t = {:.3} s of {} s",
+            super::stop::received_signal()
+                .and_then(super::stop::signal_name)
+                .unwrap_or("a stop request"),
+            summary.sim_time_s,
+            duration_s.unwrap_or(scene.config.duration_s)
+        );
+    }
     for (key, value) in &summary.metrics {
         println!("  {key}: {value}");
     }
@@ -100,7 +117,9 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
 
 /// Runs the scene as a ROS 2 node until stopped or `--duration`, and prints its summary.
 pub fn node(args: NodeArgs) -> anyhow::Result<()> {
+    let stop = stop_flag()?;
     args.threads.apply()?;
+    args.memory.apply()?;
     let duration_s = check_duration(args.duration)?;
     let file = args.scene.unwrap_or_else(default_node_scene);
     let scene = Scene::load(&file, &args.overrides.overrides)?;
@@ -109,7 +128,7 @@ pub fn node(args: NodeArgs) -> anyhow::Result<()> {
         realtime: args.realtime,
         bag_dir: args.bag.dir(&scene.config.name),
         progress: Bars::progress(args.json.show_progress()),
-        stop: stop_flag()?,
+        stop,
     };
     let summary = crate::ros::run_node(&scene, &opts)
         .with_context(|| format!("node on {}", scene.file.display()))?;

@@ -3,8 +3,9 @@
 
 use std::path::PathBuf;
 
-use super::options::{stop_flag, Json, Overrides, Threads};
+use super::options::{Json, MemoryLimit, Overrides, Threads};
 use super::progress::Bars;
+use super::stop::stop_flag;
 use crate::experiment::{report_table, run_experiment, Experiment, ExperimentOptions};
 use crate::sweep::{run_sweep, Sweep, SweepOptions};
 
@@ -18,6 +19,8 @@ pub struct ExperimentArgs {
     out: Option<PathBuf>,
     #[command(flatten)]
     threads: Threads,
+    #[command(flatten)]
+    memory: MemoryLimit,
     #[command(flatten)]
     overrides: Overrides,
     #[command(flatten)]
@@ -37,6 +40,8 @@ pub struct SweepArgs {
     out: Option<PathBuf>,
     #[command(flatten)]
     threads: Threads,
+    #[command(flatten)]
+    memory: MemoryLimit,
     /// Run only this study (repeatable; default all).
     #[arg(long = "study", value_name = "NAME")]
     studies: Vec<String>,
@@ -47,12 +52,14 @@ pub struct SweepArgs {
 /// Runs the experiment, prints its table (or `results.json` with `--json`), and fails if a
 /// run failed.
 pub fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
+    let stop = stop_flag()?;
     args.threads.apply()?;
+    args.memory.apply()?;
     let experiment = Experiment::load(&args.experiment, &args.overrides.overrides)?;
     let opts = ExperimentOptions {
         out_dir: args.out,
         progress: Bars::progress(args.json.show_progress()),
-        stop: Some(stop_flag()?),
+        stop: Some(stop),
         resume: args.resume,
     };
     let report = run_experiment(&experiment, &opts)?;
@@ -73,12 +80,14 @@ pub fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
 
 /// Runs the sweep's settings and prints its table (or `results.json` with `--json`).
 pub fn sweep(args: SweepArgs) -> anyhow::Result<()> {
+    let stop = stop_flag()?;
     args.threads.apply()?;
+    args.memory.apply()?;
     let sweep = Sweep::load(&args.sweep)?.only_studies(&args.studies)?;
     let opts = SweepOptions {
         out_dir: args.out,
         progress: Bars::progress(args.json.show_progress()),
-        stop: Some(stop_flag()?),
+        stop: Some(stop),
     };
     let report = run_sweep(&sweep, &opts)?;
     if args.json.json {

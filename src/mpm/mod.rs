@@ -9,6 +9,7 @@ pub mod cpic;
 pub mod grid;
 pub mod kernel;
 pub mod material;
+pub mod memory;
 pub mod particles;
 pub mod simd;
 pub mod sleep;

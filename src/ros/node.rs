@@ -53,7 +53,7 @@ pub struct NodeRunOptions {
     pub bag_dir: Option<PathBuf>,
     /// Where the node reports its simulated time, real-time factor and commands.
     pub progress: Progress,
-    /// Set by Ctrl-C / SIGTERM: stop after the current tick.
+    /// Set by Ctrl-C / SIGTERM: stop after the current substep.
     pub stop: Arc<AtomicBool>,
 }
 
@@ -302,7 +302,8 @@ impl Session<'_> {
 
     /// Rebuilds the scene; the published clock keeps running forward.
     fn reset(&mut self) -> Result<(), NodeError> {
-        let fresh = Simulation::new(self.scene)?;
+        let mut fresh = Simulation::new(self.scene)?;
+        fresh.stop_on(self.sim.stop_request());
         self.publishing.time_offset_s += self.sim.time_s();
         self.sim = fresh;
         self.commands.reset();
@@ -332,7 +333,8 @@ pub fn run_node(scene: &Scene, opts: &NodeRunOptions) -> Result<NodeSummary, Nod
         })
         .map_err(|e| ros_err("spinner thread")(&e))?;
 
-    let sim = Simulation::new(scene)?;
+    let mut sim = Simulation::new(scene)?;
+    sim.stop_on(opts.stop.clone());
     let bag = match &opts.bag_dir {
         Some(dir) => Some(BagWriter::create(dir).map_err(PublishError::from)?),
         None => None,

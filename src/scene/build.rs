@@ -418,35 +418,51 @@ fn constitutive(m: &MaterialConfig) -> Constitutive {
 /// Is a point (m) inside a shape?
 type Inside = Box<dyn Fn(&Vector3<f32>) -> bool>;
 
+/// Particles a body's lattice holds at most (its bounding box's lattice points; f64, so that a
+/// mistyped `dx` gives a huge count, not an overflow): for the memory estimate before filling.
+pub fn body_particle_bound(body: &BodyConfig, dx: f32) -> f64 {
+    let side = lattice_side(body.particles_per_cell).expect("validated") as f64;
+    let spacing = dx as f64 / side;
+    let (lo, hi, _) = body_bounds(body);
+    (hi - lo)
+        .iter()
+        .map(|&e| (e as f64 / spacing).round().max(1.0))
+        .product()
+}
+
+/// A body's bounding box (m) and the test of whether a point is inside it.
+fn body_bounds(body: &BodyConfig) -> (Vector3<f32>, Vector3<f32>, Inside) {
+    match (&body.box_shape, &body.cylinder) {
+        (Some(b), _) => (
+            b.min_m.into(),
+            b.max_m.into(),
+            Box::new(|_: &Vector3<f32>| true),
+        ),
+        (None, Some(c)) => {
+            let a = c.axis.index();
+            let centre = Vector3::from(c.base_centre_m);
+            let (r, h) = (c.radius_m, c.height_m);
+            let mut lo = centre.add_scalar(-r);
+            let mut hi = centre.add_scalar(r);
+            lo[a] = centre[a];
+            hi[a] = centre[a] + h;
+            let inside = move |x: &Vector3<f32>| {
+                let mut d = x - centre;
+                d[a] = 0.0;
+                d.norm_squared() <= r * r
+            };
+            (lo, hi, Box::new(inside))
+        }
+        (None, None) => unreachable!("validated"),
+    }
+}
+
 /// Particles on a regular lattice of `n^3` per cell (aligned with the grid), inside the body.
 pub fn fill_body(body: &BodyConfig, dx: f32, density: f32, material: u16) -> Vec<NewParticle> {
     let side = lattice_side(body.particles_per_cell).expect("validated") as f32;
     let spacing = dx / side;
     let volume = spacing * spacing * spacing;
-    let (lo, hi, inside): (Vector3<f32>, Vector3<f32>, Inside) =
-        match (&body.box_shape, &body.cylinder) {
-            (Some(b), _) => (
-                b.min_m.into(),
-                b.max_m.into(),
-                Box::new(|_: &Vector3<f32>| true),
-            ),
-            (None, Some(c)) => {
-                let a = c.axis.index();
-                let centre = Vector3::from(c.base_centre_m);
-                let (r, h) = (c.radius_m, c.height_m);
-                let mut lo = centre.add_scalar(-r);
-                let mut hi = centre.add_scalar(r);
-                lo[a] = centre[a];
-                hi[a] = centre[a] + h;
-                let inside = move |x: &Vector3<f32>| {
-                    let mut d = x - centre;
-                    d[a] = 0.0;
-                    d.norm_squared() <= r * r
-                };
-                (lo, hi, Box::new(inside))
-            }
-            (None, None) => unreachable!("validated"),
-        };
+    let (lo, hi, inside) = body_bounds(body);
     // Lattice points at (i + 1/2) spacing from the box corner.
     let counts = (hi - lo).map(|e| (e / spacing).round().max(1.0) as usize);
     let mut out = Vec::with_capacity(counts.x * counts.y * counts.z);

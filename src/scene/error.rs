@@ -24,6 +24,9 @@ pub enum RunError {
     },
     #[error(transparent)]
     Robot(#[from] RobotError),
+    /// The sand would not fit in memory (`super::memory`).
+    #[error("{0}")]
+    Memory(String),
     #[error("scene {0} has nothing to simulate (no `sand` or `robot` section)")]
     Empty(String),
     #[error(transparent)]

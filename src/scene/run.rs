@@ -24,8 +24,8 @@ pub struct RunOptions {
     pub out_dir: Option<PathBuf>,
     /// Where the run reports its simulated time after every frame.
     pub progress: Progress,
-    /// Set (e.g. by a Ctrl-C handler) to stop after the current frame; the summary then covers
-    /// the time simulated so far.
+    /// Set (e.g. by a Ctrl-C handler) to stop after the current substep; the summary then
+    /// covers the time simulated so far.
     pub stop: Option<Arc<AtomicBool>>,
 }
 
@@ -80,6 +80,9 @@ pub fn run_scene_observed(
 ) -> Result<RunSummary, RunError> {
     let config = &scene.config;
     let mut sim = Simulation::new(scene)?;
+    if let Some(stop) = &opts.stop {
+        sim.stop_on(stop.clone());
+    }
     for line in sim.bed_shortfalls() {
         eprintln!("warning: {}: sand bed: {line}", scene.file.display());
     }

@@ -25,7 +25,9 @@ mod settings;
 mod sort;
 mod stages;
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;
+
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use nalgebra::{Matrix3, Vector3};
 
@@ -280,8 +282,14 @@ impl Solver {
     /// Substeps until the simulated time reaches `time_s`; the last step is shortened to land on
     /// it. Returns the number of substeps taken.
     pub fn advance_to(&mut self, time_s: f64) -> Result<u64, SimError> {
+        self.advance_to_unless(time_s, &AtomicBool::new(false))
+    }
+
+    /// [`Solver::advance_to`], returning early, after the substep under way, once `stop` is
+    /// set (a stop request polled every substep).
+    pub fn advance_to_unless(&mut self, time_s: f64, stop: &AtomicBool) -> Result<u64, SimError> {
         let mut n = 0;
-        while self.time_s < time_s - 1e-12 {
+        while self.time_s < time_s - 1e-12 && !stop.load(Ordering::Relaxed) {
             let remaining = (time_s - self.time_s) as f32;
             self.substep_by(self.next_dt().min(remaining))?;
             n += 1;

@@ -13,7 +13,7 @@ use rand::{rngs::SmallRng, Rng, SeedableRng};
 
 const DX: f32 = 0.01;
 
-fn jelly() -> SolverMaterial {
+pub(crate) fn jelly() -> SolverMaterial {
     SolverMaterial {
         name: "jelly".into(),
         density_kg_m3: 1000.0,
@@ -23,7 +23,7 @@ fn jelly() -> SolverMaterial {
     }
 }
 
-fn settings(gravity: Vector3<f32>, walls: Walls) -> SolverSettings {
+pub(crate) fn settings(gravity: Vector3<f32>, walls: Walls) -> SolverSettings {
     SolverSettings {
         dx: DX,
         domain_min: Vector3::zeros(),

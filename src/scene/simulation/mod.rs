@@ -7,6 +7,9 @@
 mod leg_loads;
 mod terrain;
 
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
 use rapier3d::prelude::RigidBodyHandle;
 
 use super::bed::BedRule;
@@ -52,11 +55,15 @@ pub struct Simulation {
     steps: u64,
     /// Particle-steps taken (particles times sand substeps).
     particle_steps: u64,
+    /// A stop request (Ctrl-C), polled every substep: once set, [`Simulation::advance_to`]
+    /// returns after the substep under way.
+    stop: Arc<AtomicBool>,
 }
 
 impl Simulation {
     /// Builds the scene's terrain and robot at time 0.
     pub fn new(scene: &Scene) -> Result<Self, RunError> {
+        super::memory::check(scene)?;
         let config = &scene.config;
         let robot = match &config.robot {
             Some(cfg) => Some(Box::new(RobotSim::new(cfg, config.gravity_m_s2)?)),
@@ -84,6 +91,7 @@ impl Simulation {
             leg_loads: LegLoads::default(),
             steps: 0,
             particle_steps: 0,
+            stop: Arc::new(AtomicBool::new(false)),
         })
     }
 
@@ -96,13 +104,26 @@ impl Simulation {
         }
     }
 
-    /// Advances to `target_s` seconds of simulated time (no-op if already there).
+    /// Polls `stop` every substep from now on: once it is set, [`Simulation::advance_to`]
+    /// returns after the substep under way, short of its target.
+    pub fn stop_on(&mut self, stop: Arc<AtomicBool>) {
+        self.stop = stop;
+    }
+
+    /// The stop request polled every substep (given to [`Simulation::stop_on`]; a request
+    /// of its own, never set, otherwise).
+    pub fn stop_request(&self) -> Arc<AtomicBool> {
+        self.stop.clone()
+    }
+
+    /// Advances to `target_s` seconds of simulated time (no-op if already there), or less if
+    /// a stop is requested ([`Simulation::stop_on`]).
     pub fn advance_to(&mut self, target_s: f64) -> Result<(), RunError> {
         let Some(robot) = self.robot.as_deref_mut() else {
             let Terrain::Sand(sand) = &mut self.terrain else {
                 return Ok(());
             };
-            let steps = sand.solver.advance_to(target_s)?;
+            let steps = sand.solver.advance_to_unless(target_s, &self.stop)?;
             self.steps += steps;
             self.particle_steps += steps * sand.solver.particles.len() as u64;
             return Ok(());
@@ -114,6 +135,9 @@ impl Simulation {
         }
         let mut plan = self.terrain.plan(robot, robot.time_s(), target_s);
         while let Some(dt_s) = self.terrain.next_step_s(&mut plan, robot) {
+            if self.stop.load(Ordering::Relaxed) {
+                break;
+            }
             self.terrain.step_robot(robot, dt_s, &mut self.leg_loads)?;
             check_robot(robot)?;
             self.steps += 1;
