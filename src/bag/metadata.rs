@@ -103,6 +103,65 @@ pub(crate) struct QosProfile {
     pub avoid_ros_namespace_conventions: bool,
 }
 
+/// One topic as `metadata.yaml` lists it: what [`bag_metadata`] needs of it.
+pub(crate) struct TopicRecord {
+    pub name: String,
+    /// Full type name, e.g. `sensor_msgs/msg/JointState`.
+    pub type_name: String,
+    pub offered_qos_profiles: Vec<QosProfile>,
+    /// `RIHS01_<sha256 hex>`, or empty if not known.
+    pub type_description_hash: String,
+    pub message_count: u64,
+}
+
+/// The metadata of a bag of one MCAP file `file_name` holding `topics`, whose messages span
+/// the log times `time_bounds` (ns; `None` for no message).
+pub(crate) fn bag_metadata(
+    file_name: &str,
+    topics: Vec<TopicRecord>,
+    time_bounds: Option<(u64, u64)>,
+) -> BagMetadata {
+    let (start, end) = time_bounds.unwrap_or((0, 0));
+    let duration = Nanoseconds {
+        nanoseconds: end - start,
+    };
+    let starting_time = TimePoint {
+        nanoseconds_since_epoch: start,
+    };
+    let message_count = topics.iter().map(|t| t.message_count).sum();
+    BagMetadata {
+        version: ROSBAG2_METADATA_VERSION,
+        storage_identifier: STORAGE_IDENTIFIER.into(),
+        duration,
+        starting_time,
+        message_count,
+        topics_with_message_count: topics
+            .into_iter()
+            .map(|t| TopicWithMessageCount {
+                topic_metadata: TopicMetadata {
+                    name: t.name,
+                    type_name: t.type_name,
+                    serialization_format: SERIALIZATION_FORMAT.into(),
+                    offered_qos_profiles: t.offered_qos_profiles,
+                    type_description_hash: t.type_description_hash,
+                },
+                message_count: t.message_count,
+            })
+            .collect(),
+        compression_format: String::new(),
+        compression_mode: String::new(),
+        relative_file_paths: vec![file_name.to_string()],
+        files: vec![FileInformation {
+            path: file_name.to_string(),
+            starting_time,
+            duration,
+            message_count,
+        }],
+        custom_data: None,
+        ros_distro: ROS_DISTRO.into(),
+    }
+}
+
 /// The whole `metadata.yaml`.
 #[derive(Serialize, Debug)]
 pub(crate) struct MetadataFile {

@@ -10,6 +10,7 @@
 
 mod metadata;
 mod reader;
+mod reindex;
 mod type_hash;
 mod writer;
 
@@ -21,6 +22,7 @@ use std::path::PathBuf;
 pub use crate::msgs::{from_cdr, to_cdr, CdrError, MessageType, RosMessage};
 pub use metadata::{Durability, METADATA_FILE_NAME, ROSBAG2_METADATA_VERSION};
 pub use reader::BagReader;
+pub use reindex::{reindex, Reindexed};
 pub use type_hash::type_description_hash;
 pub use writer::{BagInfo, BagWriter};
 

@@ -33,6 +33,8 @@ pub struct BagReader {
     data: BTreeMap<String, TopicData>,
     /// Per-topic message counts from `metadata.yaml`, sorted by topic.
     metadata_counts: Option<TopicCounts>,
+    /// What was wrong but did not stop the read.
+    warnings: Vec<String>,
 }
 
 impl BagReader {
@@ -61,8 +63,9 @@ impl BagReader {
             }
         };
         let mut data: BTreeMap<String, TopicData> = BTreeMap::new();
+        let mut warnings = Vec::new();
         for file in &files {
-            read_mcap(file, &mut data)?;
+            warnings.extend(read_mcap(file, &mut data)?);
         }
         for topic in data.values_mut() {
             // Stable: messages with equal log times keep their file order.
@@ -82,7 +85,13 @@ impl BagReader {
             topics,
             data,
             metadata_counts,
+            warnings,
         })
+    }
+
+    /// What was wrong with the bag but did not stop it being read (an unfinished MCAP file).
+    pub fn warnings(&self) -> &[String] {
+        &self.warnings
     }
 
     /// What was opened.
@@ -173,7 +182,7 @@ impl BagReader {
 }
 
 /// `pkg/msg/Name` for a schema name with or without `/msg/`.
-fn full_type_name(schema_name: &str) -> String {
+pub(super) fn full_type_name(schema_name: &str) -> String {
     match schema_name.split('/').collect::<Vec<_>>()[..] {
         [package, name] => format!("{package}/msg/{name}"),
         _ => schema_name.to_string(),
@@ -229,7 +238,7 @@ fn read_metadata(
 }
 
 /// The one `.mcap` file of a directory without `metadata.yaml`.
-fn single_mcap(dir: &Path) -> Result<PathBuf, BagError> {
+pub(super) fn single_mcap(dir: &Path) -> Result<PathBuf, BagError> {
     let mut found = Vec::new();
     for entry in std::fs::read_dir(dir).map_err(|e| BagError::io(dir, e))? {
         let path = entry.map_err(|e| BagError::io(dir, e))?.path();
@@ -253,9 +262,17 @@ fn single_mcap(dir: &Path) -> Result<PathBuf, BagError> {
     }
 }
 
-/// Adds every message and channel of the MCAP file `path` to `data`.
-fn read_mcap(path: &Path, data: &mut BTreeMap<String, TopicData>) -> Result<(), BagError> {
+/// Adds every message and channel of the MCAP file `path` to `data`. A file that was never
+/// finished (its writer killed: no summary, no closing magic) gives the messages of its
+/// complete chunks, and `Some` with what was left unread.
+fn read_mcap(
+    path: &Path,
+    data: &mut BTreeMap<String, TopicData>,
+) -> Result<Option<String>, BagError> {
     let bytes = std::fs::read(path).map_err(|e| BagError::io(path, e))?;
+    if bytes.starts_with(mcap::MAGIC) && !bytes.ends_with(mcap::MAGIC) {
+        return read_unfinished_mcap(path, &bytes, data).map(Some);
+    }
     for message in mcap::MessageStream::new(&bytes).map_err(|e| BagError::mcap(path, e))? {
         let message = message.map_err(|e| BagError::mcap(path, e))?;
         topic_of_channel(data, &message.channel, path)?
@@ -270,7 +287,39 @@ fn read_mcap(path: &Path, data: &mut BTreeMap<String, TopicData>) -> Result<(), 
             topic_of_channel(data, channel, path)?;
         }
     }
-    Ok(())
+    Ok(None)
+}
+
+/// The messages of an unfinished MCAP file, read from its start up to the first record that
+/// is cut off (the chunk being written when its writer died); says what was left unread.
+fn read_unfinished_mcap(
+    path: &Path,
+    bytes: &[u8],
+    data: &mut BTreeMap<String, TopicData>,
+) -> Result<String, BagError> {
+    let stream =
+        mcap::MessageStream::new_with_options(bytes, mcap::read::Options::IgnoreEndMagic.into())
+            .map_err(|e| BagError::mcap(path, e))?;
+    let mut read = 0u64;
+    for message in stream {
+        let Ok(message) = message else {
+            return Ok(format!(
+                "{} is unfinished (its writer was killed?): read {read} messages from its \
+                 complete chunks, the rest of the file is cut off; `sandstep bag reindex` \
+                 finishes it",
+                path.display()
+            ));
+        };
+        topic_of_channel(data, &message.channel, path)?
+            .messages
+            .push((message.log_time, message.data.into_owned()));
+        read += 1;
+    }
+    Ok(format!(
+        "{} is unfinished (no summary or closing magic): read {read} messages; `sandstep bag \
+         reindex` finishes it",
+        path.display()
+    ))
 }
 
 /// The entry of `channel`'s topic in `data`, added if new; an error if the topic has another

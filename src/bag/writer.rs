@@ -4,23 +4,20 @@ use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
 
-use super::metadata::{
-    BagMetadata, FileInformation, MetadataFile, Nanoseconds, TimePoint, TopicMetadata,
-    TopicWithMessageCount, ROSBAG2_METADATA_VERSION, ROS_DISTRO, SERIALIZATION_FORMAT,
-    STORAGE_IDENTIFIER,
-};
+use super::metadata::{bag_metadata, BagMetadata, MetadataFile, TopicRecord, SERIALIZATION_FORMAT};
 use super::{type_description_hash, BagError, Durability, TopicInfo, METADATA_FILE_NAME};
 use crate::msgs::{to_cdr, MessageType, RosMessage};
 
 /// MCAP profile of ROS 2 bags (readers such as `rosbags` refuse files without it).
 const MCAP_PROFILE: &str = "ros2";
 /// Schema encoding of `.msg` definitions with their dependencies.
-const SCHEMA_ENCODING: &str = "ros2msg";
+pub(super) const SCHEMA_ENCODING: &str = "ros2msg";
 /// Channel metadata key of the offered QoS profiles (YAML).
-const QOS_METADATA_KEY: &str = "offered_qos_profiles";
+pub(super) const QOS_METADATA_KEY: &str = "offered_qos_profiles";
 /// Channel metadata key of the RIHS01 type hash.
-const TYPE_HASH_METADATA_KEY: &str = "topic_type_hash";
+pub(super) const TYPE_HASH_METADATA_KEY: &str = "topic_type_hash";
 /// Name of the MCAP metadata record in which rosbag2 repeats `metadata.yaml`.
 const ROSBAG2_METADATA_RECORD: &str = "rosbag2";
 /// Key of the bag metadata (YAML, without the top-level key) in that record.
@@ -28,6 +25,10 @@ const SERIALIZED_METADATA_KEY: &str = "serialized_metadata";
 /// zstd worker threads: 0 compresses each chunk (1 MiB) on the writing thread instead of
 /// starting one thread per physical core next to the simulation's own.
 const COMPRESSION_THREADS: u32 = 0;
+/// Longest wall time a written message waits in an open chunk: the chunk is then closed and
+/// flushed to the file, so a killed process (SIGKILL, the out-of-memory killer) loses at most
+/// this much of its recording (`sandstep bag reindex` finishes what is left).
+const CHUNK_FLUSH_INTERVAL: Duration = Duration::from_secs(1);
 /// Bytes a CDR message has at least: the encapsulation header.
 const CDR_HEADER_LEN: usize = 4;
 /// First two bytes of the encapsulation header: plain CDR, big- or little-endian.
@@ -77,6 +78,8 @@ pub struct BagWriter {
     schema_ids: BTreeMap<String, u16>,
     /// Earliest and latest log time written (ns).
     time_bounds: Option<(u64, u64)>,
+    /// When the last chunk was closed and flushed to the file.
+    last_flush: Instant,
 }
 
 impl BagWriter {
@@ -101,13 +104,7 @@ impl BagWriter {
         }
         std::fs::create_dir_all(dir).map_err(|e| BagError::io(dir, e))?;
         let mcap_path = dir.join(&file_name);
-        let file = File::create(&mcap_path).map_err(|e| BagError::io(&mcap_path, e))?;
-        let mcap = mcap::WriteOptions::new()
-            .profile(MCAP_PROFILE)
-            .compression(Some(mcap::Compression::Zstd))
-            .compression_threads(COMPRESSION_THREADS)
-            .create(BufWriter::new(file))
-            .map_err(|e| BagError::mcap(&mcap_path, e))?;
+        let mcap = create_mcap(&mcap_path)?;
         Ok(Self {
             dir: dir.to_path_buf(),
             file_name,
@@ -116,6 +113,7 @@ impl BagWriter {
             topics: BTreeMap::new(),
             schema_ids: BTreeMap::new(),
             time_bounds: None,
+            last_flush: Instant::now(),
         })
     }
 
@@ -268,11 +266,14 @@ impl BagWriter {
             log_time: time_ns,
             publish_time: time_ns,
         };
-        self.mcap
-            .as_mut()
-            .expect("writer is open until finished")
-            .write_to_known_channel(&header, data)
+        let mcap = self.mcap.as_mut().expect("writer is open until finished");
+        mcap.write_to_known_channel(&header, data)
             .map_err(|e| BagError::mcap(&self.mcap_path, e))?;
+        if self.last_flush.elapsed() >= CHUNK_FLUSH_INTERVAL {
+            mcap.flush()
+                .map_err(|e| BagError::mcap(&self.mcap_path, e))?;
+            self.last_flush = Instant::now();
+        }
         entry.message_count += 1;
         self.time_bounds = Some(match self.time_bounds {
             None => (time_ns, time_ns),
@@ -283,71 +284,27 @@ impl BagWriter {
 
     /// The bag metadata of what has been written so far.
     fn metadata(&self) -> BagMetadata {
-        let (start, end) = self.time_bounds.unwrap_or((0, 0));
-        let duration = Nanoseconds {
-            nanoseconds: end - start,
-        };
-        let starting_time = TimePoint {
-            nanoseconds_since_epoch: start,
-        };
-        let message_count = self.topics.values().map(|t| t.message_count).sum();
-        BagMetadata {
-            version: ROSBAG2_METADATA_VERSION,
-            storage_identifier: STORAGE_IDENTIFIER.into(),
-            duration,
-            starting_time,
-            message_count,
-            topics_with_message_count: self
-                .topics
-                .iter()
-                .map(|(name, t)| TopicWithMessageCount {
-                    topic_metadata: TopicMetadata {
-                        name: name.clone(),
-                        type_name: t.ty.type_name(),
-                        serialization_format: SERIALIZATION_FORMAT.into(),
-                        offered_qos_profiles: t.durability.offered_qos_profiles(),
-                        type_description_hash: type_description_hash(t.ty).unwrap_or_default(),
-                    },
-                    message_count: t.message_count,
-                })
-                .collect(),
-            compression_format: String::new(),
-            compression_mode: String::new(),
-            relative_file_paths: vec![self.file_name.clone()],
-            files: vec![FileInformation {
-                path: self.file_name.clone(),
-                starting_time,
-                duration,
-                message_count,
-            }],
-            custom_data: None,
-            ros_distro: ROS_DISTRO.into(),
-        }
+        let topics = self
+            .topics
+            .iter()
+            .map(|(name, t)| TopicRecord {
+                name: name.clone(),
+                type_name: t.ty.type_name(),
+                offered_qos_profiles: t.durability.offered_qos_profiles(),
+                type_description_hash: type_description_hash(t.ty).unwrap_or_default(),
+                message_count: t.message_count,
+            })
+            .collect();
+        bag_metadata(&self.file_name, topics, self.time_bounds)
     }
 
     /// Finishes the MCAP and writes `metadata.yaml`; does nothing more once done.
     fn finish_in_place(&mut self) -> Result<BagInfo, BagError> {
         let mcap_path = self.mcap_path.clone();
         let metadata = self.metadata();
-        if let Some(mut mcap) = self.mcap.take() {
-            let serialized =
-                serde_yaml_ng::to_string(&metadata).expect("bag metadata always serialises");
-            let record = mcap::records::Metadata {
-                name: ROSBAG2_METADATA_RECORD.into(),
-                metadata: BTreeMap::from([(SERIALIZED_METADATA_KEY.into(), serialized)]),
-            };
-            mcap.write_metadata(&record)
-                .map_err(|e| BagError::mcap(&mcap_path, e))?;
-            mcap.finish().map_err(|e| BagError::mcap(&mcap_path, e))?;
-            mcap.into_inner()
-                .into_inner()
-                .map_err(|e| BagError::io(&mcap_path, e.into_error()))?;
-            let metadata_path = self.dir.join(METADATA_FILE_NAME);
-            let yaml = serde_yaml_ng::to_string(&MetadataFile {
-                rosbag2_bagfile_information: metadata,
-            })
-            .expect("bag metadata always serialises");
-            std::fs::write(&metadata_path, yaml).map_err(|e| BagError::io(&metadata_path, e))?;
+        if let Some(mcap) = self.mcap.take() {
+            finish_mcap(mcap, &mcap_path, &metadata)?;
+            write_metadata_yaml(&self.dir, metadata)?;
         }
         Ok(self.info())
     }
@@ -370,6 +327,48 @@ impl BagWriter {
                 .collect(),
         }
     }
+}
+
+/// A new MCAP writer on `path`: zstd-compressed chunks, the ROS 2 profile.
+pub(super) fn create_mcap(path: &Path) -> Result<mcap::Writer<BufWriter<File>>, BagError> {
+    let file = File::create(path).map_err(|e| BagError::io(path, e))?;
+    mcap::WriteOptions::new()
+        .profile(MCAP_PROFILE)
+        .compression(Some(mcap::Compression::Zstd))
+        .compression_threads(COMPRESSION_THREADS)
+        .create(BufWriter::new(file))
+        .map_err(|e| BagError::mcap(path, e))
+}
+
+/// Writes rosbag2's copy of the metadata into the MCAP at `path`, its summary and footer, and
+/// flushes it to the file.
+pub(super) fn finish_mcap(
+    mut mcap: mcap::Writer<BufWriter<File>>,
+    path: &Path,
+    metadata: &BagMetadata,
+) -> Result<(), BagError> {
+    let serialized = serde_yaml_ng::to_string(metadata).expect("bag metadata always serialises");
+    let record = mcap::records::Metadata {
+        name: ROSBAG2_METADATA_RECORD.into(),
+        metadata: BTreeMap::from([(SERIALIZED_METADATA_KEY.into(), serialized)]),
+    };
+    mcap.write_metadata(&record)
+        .map_err(|e| BagError::mcap(path, e))?;
+    mcap.finish().map_err(|e| BagError::mcap(path, e))?;
+    mcap.into_inner()
+        .into_inner()
+        .map_err(|e| BagError::io(path, e.into_error()))?;
+    Ok(())
+}
+
+/// Writes the bag directory's `metadata.yaml`.
+pub(super) fn write_metadata_yaml(dir: &Path, metadata: BagMetadata) -> Result<(), BagError> {
+    let metadata_path = dir.join(METADATA_FILE_NAME);
+    let yaml = serde_yaml_ng::to_string(&MetadataFile {
+        rosbag2_bagfile_information: metadata,
+    })
+    .expect("bag metadata always serialises");
+    std::fs::write(&metadata_path, yaml).map_err(|e| BagError::io(&metadata_path, e))
 }
 
 impl Drop for BagWriter {

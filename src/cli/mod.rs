@@ -43,6 +43,9 @@ enum Command {
     Urdf(urdf::UrdfArgs),
     /// Summarise a recorded bag: distance, speed per gait cycle, sinkage, leg forces, commands.
     Analyze(tools::AnalyzeArgs),
+    /// Bag tools: `reindex` finishes a bag whose recording was killed.
+    #[command(subcommand)]
+    Bag(tools::BagCommand),
     /// Calibrate resistive force theory: press a plate into the scene's MPM sand and fit zeta.
     CalibrateRft(tools::CalibrateRftArgs),
     /// Measure solver throughput on a 3D sand block collapsing under gravity.
@@ -67,6 +70,7 @@ pub fn main() -> ExitCode {
         Command::Sweep(args) => series::sweep(args),
         Command::Urdf(args) => urdf::urdf(&args),
         Command::Analyze(args) => tools::analyze(args),
+        Command::Bag(command) => tools::bag(command),
         Command::CalibrateRft(args) => tools::calibrate_rft(args),
         Command::Bench(args) => tools::bench(args),
     };

@@ -1,5 +1,6 @@
-//! `sandstep analyze` (a recorded bag), `sandstep calibrate-rft` (RFT's zeta from the scene's
-//! sand) and `sandstep bench` (the sand substep's throughput).
+//! `sandstep analyze` (a recorded bag), `sandstep bag reindex` (a killed recording, finished),
+//! `sandstep calibrate-rft` (RFT's zeta from the scene's sand) and `sandstep bench` (the sand
+//! substep's throughput).
 
 use std::path::PathBuf;
 
@@ -10,6 +11,9 @@ use crate::analysis::bag::{analyze_bag_with, AnalysisOptions};
 use crate::analysis::plots::write_plots;
 use crate::mpm::simd::InstructionSet;
 use crate::scene::Scene;
+
+/// Nanoseconds per second, for the bag's log times.
+const NANOS_PER_SECOND: f64 = 1e9;
 
 /// `sandstep analyze`.
 #[derive(clap::Args)]
@@ -24,6 +28,42 @@ pub struct AnalyzeArgs {
     plots: Option<PathBuf>,
     #[command(flatten)]
     json: Json,
+}
+
+/// `sandstep bag ...`.
+#[derive(clap::Subcommand)]
+pub enum BagCommand {
+    /// Finish a bag whose recording was killed: write its MCAP summary and metadata.yaml from
+    /// the messages of its complete chunks (the unfinished file is kept as *.unfinished).
+    Reindex {
+        /// Bag directory (without metadata.yaml).
+        bag: PathBuf,
+        #[command(flatten)]
+        json: Json,
+    },
+}
+
+/// Runs a `sandstep bag` command.
+pub fn bag(command: BagCommand) -> anyhow::Result<()> {
+    match command {
+        BagCommand::Reindex { bag, json } => {
+            let done = crate::bag::reindex(&bag)
+                .with_context(|| format!("reindexing {}", bag.display()))?;
+            if json.json {
+                println!("{}", serde_json::to_string(&done)?);
+            } else {
+                println!(
+                    "{}: {} messages recovered, up to t = {:.3} s; the unfinished file is kept as \
+                     {}",
+                    done.mcap_path.display(),
+                    done.message_count,
+                    done.last_time_ns.unwrap_or(0) as f64 / NANOS_PER_SECOND,
+                    done.unfinished_path.display()
+                );
+            }
+            Ok(())
+        }
+    }
 }
 
 /// `sandstep calibrate-rft`.

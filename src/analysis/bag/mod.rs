@@ -443,7 +443,11 @@ pub fn analyze_bag(path: &Path) -> Result<BagAnalysis, AnalysisError> {
 pub fn analyze_bag_with(path: &Path, opts: &AnalysisOptions) -> Result<BagAnalysis, AnalysisError> {
     let reader = BagReader::open(path)?;
     check_types(&reader)?;
-    let mut notes = Vec::new();
+    let mut notes: Vec<String> = reader
+        .warnings()
+        .iter()
+        .map(|w| format!("warning: {w}"))
+        .collect();
 
     // Body poses and the time base.
     let tf_msgs = read_optional::<msgs::TFMessage>(&reader, TF_TOPIC)?;
