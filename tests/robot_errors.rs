@@ -52,6 +52,33 @@ fn malformed_urdf_names_the_file() {
     );
 }
 
+/// A malformed URDF says where it breaks (issue 22: it gave no line): a link left open (its
+/// closing tag removed) is reported at the line where a later element closes.
+#[test]
+fn malformed_urdf_names_the_line() {
+    let (_dir, path) = edited_urdf(|t| {
+        let mut lines: Vec<String> = t.lines().map(String::from).collect();
+        // The first link's `</link>` removed.
+        let close = lines.iter().position(|l| l.trim() == "</link>").unwrap();
+        lines.remove(close);
+        lines.join("\n")
+    });
+    let (_, msg) = message(load(&path));
+    let at = msg
+        .split("line ")
+        .nth(1)
+        .and_then(|rest| rest.split(',').next())
+        .and_then(|n| n.parse::<usize>().ok())
+        .unwrap_or_else(|| panic!("no line in `{msg}`"));
+    let text = std::fs::read_to_string(&path).unwrap();
+    let line = text.lines().nth(at - 1).unwrap_or_default();
+    assert!(
+        line.contains("</"),
+        "line {at} `{line}` closes an element: {msg}"
+    );
+    assert!(msg.contains("column "), "{msg}");
+}
+
 #[test]
 fn missing_mesh_names_link_and_mesh() {
     let (_dir, path) = edited_urdf(|t| t);

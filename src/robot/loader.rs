@@ -24,6 +24,24 @@ pub struct CheckedUrdf {
     pub root_link: String,
 }
 
+/// Where the text stops being well-formed XML ("line L, column C" and what is wrong there), or
+/// `None` if it is well-formed (then urdf-rs refused its content, not its syntax).
+fn xml_error_position(text: &str) -> Option<String> {
+    for event in xml::reader::EventReader::from_str(text) {
+        if let Err(e) = event {
+            let at = xml::common::Position::position(&e);
+            // xml-rs counts from 0; editors from 1.
+            return Some(format!(
+                "line {}, column {} ({})",
+                at.row + 1,
+                at.column + 1,
+                e.msg()
+            ));
+        }
+    }
+    None
+}
+
 /// Reads `path` and checks that it is a tree of links with positive masses, that every mesh
 /// it names exists and reads as STL, that collision shapes are primitives, and that the six
 /// leg joints of the tripod gait exist as continuous joints about +y on the root link.
@@ -31,7 +49,10 @@ pub fn load_urdf(path: &Path) -> Result<CheckedUrdf, RobotError> {
     let text = std::fs::read_to_string(path).map_err(|e| RobotError::io(path, e))?;
     let robot = urdf_rs::read_from_string(&text).map_err(|e| RobotError::UrdfParse {
         path: path.to_path_buf(),
-        message: e.to_string(),
+        message: match xml_error_position(&text) {
+            Some(at) => format!("{at}: {e}"),
+            None => e.to_string(),
+        },
     })?;
     let root_link = check_tree(path, &robot)?;
     check_geometry(path, &robot)?;
