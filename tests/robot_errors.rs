@@ -191,3 +191,24 @@ fn config_errors_name_file_and_field() {
         "{msg}"
     );
 }
+
+/// A start yaw beyond a turn is refused, naming the field (tests/fuzz.rs found 1e308 deg: the
+/// f32 rotation overflowed, the pose became NaN, and the sand window's walls crossed).
+#[test]
+fn a_yaw_beyond_a_turn_is_refused() {
+    for yaw in ["1e308", "361", "-400"] {
+        let yaml = format!("urdf: urdf/hexapod.urdf\ninitial_pose: {{yaw_deg: {yaw}}}\n");
+        let cfg: RobotConfig = serde_yaml_ng::from_str(&yaml).unwrap();
+        let msg = cfg
+            .validate(Path::new("config/bad.yaml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.starts_with("config/bad.yaml: robot.initial_pose.yaw_deg"),
+            "{yaw}: {msg}"
+        );
+    }
+    let yaml = "urdf: urdf/hexapod.urdf\ninitial_pose: {yaw_deg: -360}\n";
+    let cfg: RobotConfig = serde_yaml_ng::from_str(yaml).unwrap();
+    cfg.validate(Path::new("config/ok.yaml")).unwrap();
+}

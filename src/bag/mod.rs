@@ -8,6 +8,7 @@
 //! Times are nanoseconds as given to [`BagWriter::write`] (the node uses simulated time since
 //! the start, so "since the epoch" in `metadata.yaml` means "since the simulation started").
 
+mod chunks;
 mod metadata;
 mod reader;
 mod reindex;

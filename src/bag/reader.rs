@@ -3,6 +3,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use super::chunks::{believable_prefix, read_options, unfinished_read_options};
 use super::metadata::{MetadataFileIn, SERIALIZATION_FORMAT, STORAGE_IDENTIFIER};
 use super::{BagError, TopicInfo, METADATA_FILE_NAME};
 use crate::msgs::{from_cdr, MessageType, RosMessage};
@@ -270,10 +271,18 @@ fn read_mcap(
     data: &mut BTreeMap<String, TopicData>,
 ) -> Result<Option<String>, BagError> {
     let bytes = std::fs::read(path).map_err(|e| BagError::io(path, e))?;
-    if bytes.starts_with(mcap::MAGIC) && !bytes.ends_with(mcap::MAGIC) {
-        return read_unfinished_mcap(path, &bytes, data).map(Some);
+    if bytes.starts_with(mcap::MAGIC) {
+        if let (readable, Some(problem)) = believable_prefix(&bytes) {
+            let read = read_unfinished_mcap(path, &bytes[..readable], data)?;
+            return Ok(Some(format!("{problem}; {read}")));
+        }
+        if !bytes.ends_with(mcap::MAGIC) {
+            return read_unfinished_mcap(path, &bytes, data).map(Some);
+        }
     }
-    for message in mcap::MessageStream::new(&bytes).map_err(|e| BagError::mcap(path, e))? {
+    let stream = mcap::MessageStream::new_with_options(&bytes, read_options())
+        .map_err(|e| BagError::mcap(path, e))?;
+    for message in stream {
         let message = message.map_err(|e| BagError::mcap(path, e))?;
         topic_of_channel(data, &message.channel, path)?
             .messages
@@ -297,9 +306,8 @@ fn read_unfinished_mcap(
     bytes: &[u8],
     data: &mut BTreeMap<String, TopicData>,
 ) -> Result<String, BagError> {
-    let stream =
-        mcap::MessageStream::new_with_options(bytes, mcap::read::Options::IgnoreEndMagic.into())
-            .map_err(|e| BagError::mcap(path, e))?;
+    let stream = mcap::MessageStream::new_with_options(bytes, unfinished_read_options())
+        .map_err(|e| BagError::mcap(path, e))?;
     let mut read = 0u64;
     for message in stream {
         let Ok(message) = message else {

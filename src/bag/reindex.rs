@@ -7,6 +7,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use super::chunks::{believable_prefix, unfinished_read_options};
 use super::metadata::{bag_metadata, Durability, QosProfile, TopicRecord};
 use super::reader::{full_type_name, single_mcap};
 use super::writer::{
@@ -42,6 +43,7 @@ struct Channel {
 pub fn reindex(dir: &Path) -> Result<Reindexed, BagError> {
     let mcap_path = single_mcap(dir)?;
     let bytes = std::fs::read(&mcap_path).map_err(|e| BagError::io(&mcap_path, e))?;
+    let (readable, _) = believable_prefix(&bytes);
     if bytes.ends_with(mcap::MAGIC) && dir.join(METADATA_FILE_NAME).exists() {
         return Err(BagError::Metadata {
             path: dir.to_path_buf(),
@@ -59,8 +61,8 @@ pub fn reindex(dir: &Path) -> Result<Reindexed, BagError> {
     // Records one by one: a chunk is handed over whole, so one cut off by the kill ends the
     // loop with an error and nothing of it is written.
     let mut raw = mcap::read::RawMessageStream::new_with_options(
-        &bytes,
-        mcap::read::Options::IgnoreEndMagic.into(),
+        &bytes[..readable],
+        unfinished_read_options(),
     )
     .map_err(|e| BagError::mcap(&mcap_path, e))?;
     while let Some(Ok(message)) = raw.next() {

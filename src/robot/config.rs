@@ -216,6 +216,8 @@ impl Default for PhysicsConfig {
 const MAX_PHYSICS_DT_S: f64 = 0.01;
 /// Largest accepted number of solver iterations.
 const MAX_SOLVER_ITERATIONS: usize = 100;
+/// Largest start yaw accepted (deg): one turn either way.
+const MAX_YAW_DEG: f64 = 360.0;
 /// Largest accepted initial clearance (m): higher drops would land the robot hard.
 const MAX_CLEARANCE_M: f64 = 0.1;
 
@@ -272,6 +274,15 @@ impl RobotConfig {
         finite("initial_pose.position_m[0]", pose.position_m[0])?;
         finite("initial_pose.position_m[1]", pose.position_m[1])?;
         finite("initial_pose.yaw_deg", pose.yaw_deg)?;
+        if pose.yaw_deg.abs() > MAX_YAW_DEG {
+            // Beyond a turn the angle says nothing more, and huge values overflow the f32
+            // rotation (NaN pose; found by tests/fuzz.rs with 1e308).
+            return Err(fail(
+                "initial_pose.yaw_deg",
+                pose.yaw_deg.to_string(),
+                &format!("must be within +-{MAX_YAW_DEG} deg"),
+            ));
+        }
         non_negative("initial_pose.clearance_m", pose.clearance_m)?;
         if pose.clearance_m > MAX_CLEARANCE_M {
             return Err(fail(
