@@ -105,10 +105,6 @@ fn out_of_range_values() {
             "column_collapse.particles_per_cell=5",
             "column_collapse.particles_per_cell",
         ),
-        // The prediction (on by default) needs the yielding inertia the link's dynamics
-        // present: another yield is refused, naming both fields.
-        ("coupling.legs_yield_with=leg", "coupling.legs_yield_with"),
-        ("coupling.legs_yield_with=robot", "coupling.load_prediction"),
     ] {
         assert_names(&error_of(SCENE, &[set]), &["scenes/test.yaml", field]);
     }
@@ -259,6 +255,27 @@ fn a_robot_starting_off_the_sand() {
                 "{set} {window}"
             );
         }
+    }
+}
+
+/// The load prediction needs the yielding inertia the link's dynamics present: with another
+/// leg yield it is refused, naming both fields.
+#[test]
+fn the_load_prediction_needs_the_articulated_leg() {
+    for yield_with in ["leg", "robot"] {
+        let leg_yield = format!("coupling.legs_yield_with={yield_with}");
+        let e = error_of(
+            SCENE,
+            &[leg_yield.as_str(), "coupling.load_prediction=last_substep"],
+        );
+        assert_names(
+            &e,
+            &[
+                "scenes/test.yaml",
+                "coupling.load_prediction",
+                "coupling.legs_yield_with",
+            ],
+        );
     }
 }
 

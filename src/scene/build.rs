@@ -51,8 +51,8 @@ pub fn validate(scene: &Scene) -> Result<(), SceneError> {
     {
         return Err(scene.invalid(
             "coupling.load_prediction",
-            "last_substep (the default) needs coupling.legs_yield_with: articulated (the \
-             default); with legs_yield_with: leg or robot set load_prediction: none (a leg that \
+            "last_substep needs coupling.legs_yield_with: articulated (the default); with \
+             legs_yield_with: leg or robot set load_prediction: none (the default; a leg that \
              yields with any other inertia than its multibody's turns the prediction into a \
              stiff spring: docs/physics.md, CPIC step 7)",
         ));

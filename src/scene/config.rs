@@ -424,8 +424,9 @@ pub struct CouplingConfig {
     pub legs_yield_with: crate::coupling::LegYield,
     /// The velocity the yield takes for a robot link: `none` (its velocity at the start of the
     /// substep) or `last_substep` (plus the change every other load gives it over the substep,
-    /// measured over the last one; needs `legs_yield_with: articulated`). Default
-    /// `last_substep`.
+    /// measured over the last one; needs `legs_yield_with: articulated`; the walking robot's
+    /// speed then follows the step below CFL 0.4: `docs/speed-vs-accuracy.md`). Default
+    /// `none`.
     #[serde(default = "default_load_prediction")]
     pub load_prediction: crate::coupling::LoadPrediction,
     /// With `legs_yield_with: articulated`, a leg also yields with the impedance its motor
@@ -448,7 +449,7 @@ fn default_legs_yield_with() -> crate::coupling::LegYield {
     crate::coupling::LegYield::Articulated
 }
 fn default_load_prediction() -> crate::coupling::LoadPrediction {
-    crate::coupling::LoadPrediction::LastSubstep
+    crate::coupling::LoadPrediction::None
 }
 
 impl Default for CouplingConfig {
