@@ -58,8 +58,8 @@ pub fn reindex(dir: &Path) -> Result<Reindexed, BagError> {
     let mut channels: BTreeMap<u16, Channel> = BTreeMap::new();
     let mut schemas: BTreeMap<u16, u16> = BTreeMap::new();
     let (mut message_count, mut time_bounds) = (0u64, None::<(u64, u64)>);
-    // Records one by one: a chunk is handed over whole, so one cut off by the kill ends the
-    // loop with an error and nothing of it is written.
+    // Messages in file order; a chunk cut off by the kill ends the loop with an error and
+    // nothing of it is written.
     let mut raw = mcap::read::RawMessageStream::new_with_options(
         &bytes[..readable],
         unfinished_read_options(),
@@ -93,25 +93,7 @@ pub fn reindex(dir: &Path) -> Result<Reindexed, BagError> {
                     &source.metadata,
                 )
                 .map_err(mcap_err)?;
-            let record = TopicRecord {
-                name: source.topic.clone(),
-                type_name: source
-                    .schema
-                    .as_ref()
-                    .map(|s| full_type_name(&s.name))
-                    .unwrap_or_default(),
-                offered_qos_profiles: source
-                    .metadata
-                    .get(QOS_METADATA_KEY)
-                    .and_then(|yaml| serde_yaml_ng::from_str::<Vec<QosProfile>>(yaml).ok())
-                    .unwrap_or_else(|| Durability::Volatile.offered_qos_profiles()),
-                type_description_hash: source
-                    .metadata
-                    .get(TYPE_HASH_METADATA_KEY)
-                    .cloned()
-                    .unwrap_or_default(),
-                message_count: 0,
-            };
+            let record = topic_record(&source);
             entry.insert(Channel { new_id, record });
         }
         let channel = channels.get_mut(&header.channel_id).expect("added above");
@@ -143,6 +125,30 @@ pub fn reindex(dir: &Path) -> Result<Reindexed, BagError> {
         message_count,
         last_time_ns: time_bounds.map(|(_, last)| last),
     })
+}
+
+/// The topic of an MCAP channel as `metadata.yaml` lists it (no message counted yet): its QoS
+/// and type hash from the channel's metadata, as [`super::BagWriter`] wrote them.
+fn topic_record(channel: &mcap::Channel) -> TopicRecord {
+    TopicRecord {
+        name: channel.topic.clone(),
+        type_name: channel
+            .schema
+            .as_ref()
+            .map(|s| full_type_name(&s.name))
+            .unwrap_or_default(),
+        offered_qos_profiles: channel
+            .metadata
+            .get(QOS_METADATA_KEY)
+            .and_then(|yaml| serde_yaml_ng::from_str::<Vec<QosProfile>>(yaml).ok())
+            .unwrap_or_else(|| Durability::Volatile.offered_qos_profiles()),
+        type_description_hash: channel
+            .metadata
+            .get(TYPE_HASH_METADATA_KEY)
+            .cloned()
+            .unwrap_or_default(),
+        message_count: 0,
+    }
 }
 
 /// `path` with `.suffix` added after its extension.
