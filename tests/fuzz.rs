@@ -180,14 +180,15 @@ proptest! {
         let _ = RobotSim::new(&cfg, [0.0, 0.0, -9.81]);
     }
 
-    /// A bag cut short (a killed recording, a full disk), or with a chunk's header damaged:
-    /// read and reindexed. (Bytes changed inside a compressed chunk can still abort inside the
-    /// `mcap` crate's reader, which allocates a length it decoded from them: found by this
-    /// test, not yet closed; `src/bag/chunks.rs`.)
+    /// A bag cut short (a killed recording, a full disk), with a chunk's header damaged, or
+    /// with bytes changed anywhere (inside a compressed chunk they aborted the `mcap` crate's
+    /// message stream, which allocated a length decoded from them; `src/bag/chunks.rs`): read
+    /// and reindexed.
     #[test]
     fn damaged_bags_do_not_panic(
         cut in any::<prop::sample::Index>(),
         header_edits in prop::collection::vec((0..CHUNK_HEADER_BYTES, any::<u8>()), 0..3),
+        byte_edits in prop::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 0..3),
     ) {
         let dir = tempfile::tempdir().unwrap();
         let bag = dir.path().join("damaged");
@@ -207,6 +208,12 @@ proptest! {
         for (offset, byte) in header_edits {
             if let Some(b) = damaged.get_mut(chunk + offset) {
                 *b = byte;
+            }
+        }
+        for (at, byte) in byte_edits {
+            if !damaged.is_empty() {
+                let i = at.index(damaged.len());
+                damaged[i] = byte;
             }
         }
         std::fs::write(&info.mcap_path, damaged).unwrap();

@@ -3,7 +3,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use super::chunks::{believable_prefix, read_options, unfinished_read_options};
+use super::chunks::{believable_prefix, messages};
 use super::metadata::{MetadataFileIn, SERIALIZATION_FORMAT, STORAGE_IDENTIFIER};
 use super::{BagError, TopicInfo, METADATA_FILE_NAME};
 use crate::msgs::{from_cdr, MessageType, RosMessage};
@@ -280,9 +280,7 @@ fn read_mcap(
             return read_unfinished_mcap(path, &bytes, data).map(Some);
         }
     }
-    let stream = mcap::MessageStream::new_with_options(&bytes, read_options())
-        .map_err(|e| BagError::mcap(path, e))?;
-    for message in stream {
+    for message in messages(&bytes, false) {
         let message = message.map_err(|e| BagError::mcap(path, e))?;
         topic_of_channel(data, &message.channel, path)?
             .messages
@@ -306,10 +304,8 @@ fn read_unfinished_mcap(
     bytes: &[u8],
     data: &mut BTreeMap<String, TopicData>,
 ) -> Result<String, BagError> {
-    let stream = mcap::MessageStream::new_with_options(bytes, unfinished_read_options())
-        .map_err(|e| BagError::mcap(path, e))?;
     let mut read = 0u64;
-    for message in stream {
+    for message in messages(bytes, true) {
         let Ok(message) = message else {
             return Ok(format!(
                 "{} is unfinished (its writer was killed?): read {read} messages from its \

@@ -7,7 +7,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use super::chunks::{believable_prefix, unfinished_read_options};
+use super::chunks::{believable_prefix, messages};
 use super::metadata::{bag_metadata, Durability, QosProfile, TopicRecord};
 use super::reader::{full_type_name, single_mcap};
 use super::writer::{
@@ -60,18 +60,9 @@ pub fn reindex(dir: &Path) -> Result<Reindexed, BagError> {
     let (mut message_count, mut time_bounds) = (0u64, None::<(u64, u64)>);
     // Messages in file order; a chunk cut off by the kill ends the loop with an error and
     // nothing of it is written.
-    let mut raw = mcap::read::RawMessageStream::new_with_options(
-        &bytes[..readable],
-        unfinished_read_options(),
-    )
-    .map_err(|e| BagError::mcap(&mcap_path, e))?;
-    while let Some(Ok(message)) = raw.next() {
-        let header = message.header;
-        let Some(source) = raw.get_channel(header.channel_id) else {
-            continue;
-        };
-        if let std::collections::btree_map::Entry::Vacant(entry) = channels.entry(header.channel_id)
-        {
+    for message in messages(&bytes[..readable], true).map_while(Result::ok) {
+        let source = &message.channel;
+        if let std::collections::btree_map::Entry::Vacant(entry) = channels.entry(source.id) {
             let schema_id = match &source.schema {
                 Some(schema) => match schemas.get(&schema.id) {
                     Some(&id) => id,
@@ -93,19 +84,21 @@ pub fn reindex(dir: &Path) -> Result<Reindexed, BagError> {
                     &source.metadata,
                 )
                 .map_err(mcap_err)?;
-            let record = topic_record(&source);
+            let record = topic_record(source);
             entry.insert(Channel { new_id, record });
         }
-        let channel = channels.get_mut(&header.channel_id).expect("added above");
+        let channel = channels.get_mut(&source.id).expect("added above");
         let new_header = mcap::records::MessageHeader {
             channel_id: channel.new_id,
-            ..header
+            sequence: message.sequence,
+            log_time: message.log_time,
+            publish_time: message.publish_time,
         };
         out.write_to_known_channel(&new_header, &message.data)
             .map_err(mcap_err)?;
         channel.record.message_count += 1;
         message_count += 1;
-        let t = header.log_time;
+        let t = message.log_time;
         time_bounds = Some(time_bounds.map_or((t, t), |(a, b)| (a.min(t), b.max(t))));
     }
     let file_name = file_name_of(&mcap_path);
