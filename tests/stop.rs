@@ -159,3 +159,39 @@ fn a_closed_pipe_ends_analyze_quietly() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!stderr.contains("panicked"), "{stderr}");
 }
+
+/// A stop requested while the scene is being built (a large bed takes seconds to fill) ends the
+/// build between its stages, before the sand is filled, and leaves no bag: until 2026-12-06
+/// the request was first looked at after the whole build, and the recorder built the scene
+/// twice.
+#[test]
+fn a_stop_while_loading_ends_the_build_before_the_fill() {
+    use std::sync::atomic::AtomicBool;
+    use std::sync::Arc;
+
+    use sandstep::ros::{record_run, RecordError};
+    use sandstep::scene::{NoObserver, RunError, RunOptions, Scene};
+
+    let scene = Scene::load(Path::new("config/robot_on_sand.yaml"), &[]).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let bag = dir.path().join("stopped_while_loading");
+    let opts = RunOptions {
+        stop: Some(Arc::new(AtomicBool::new(true))),
+        ..Default::default()
+    };
+    let error = record_run(&scene, &opts, Some(&bag), &mut NoObserver)
+        .err()
+        .expect("the stop ends the build");
+    let RecordError::Run { cause, .. } = &error else {
+        panic!("a build error, not {error}");
+    };
+    assert!(
+        matches!(**cause, RunError::StoppedLoading(_)),
+        "stopped while loading: {error}"
+    );
+    assert!(
+        error.to_string().contains("nothing was simulated"),
+        "{error}"
+    );
+    assert!(!bag.exists(), "no bag for a run that never started");
+}

@@ -302,8 +302,7 @@ impl Session<'_> {
 
     /// Rebuilds the scene; the published clock keeps running forward.
     fn reset(&mut self) -> Result<(), NodeError> {
-        let mut fresh = Simulation::new(self.scene)?;
-        fresh.stop_on(self.sim.stop_request());
+        let fresh = Simulation::new_unless(self.scene, &self.sim.stop_request())?;
         self.publishing.time_offset_s += self.sim.time_s();
         self.sim = fresh;
         self.commands.reset();
@@ -333,8 +332,7 @@ pub fn run_node(scene: &Scene, opts: &NodeRunOptions) -> Result<NodeSummary, Nod
         })
         .map_err(|e| ros_err("spinner thread")(&e))?;
 
-    let mut sim = Simulation::new(scene)?;
-    sim.stop_on(opts.stop.clone());
+    let sim = Simulation::new_unless(scene, &opts.stop)?;
     let bag = match &opts.bag_dir {
         Some(dir) => Some(BagWriter::create(dir).map_err(PublishError::from)?),
         None => None,

@@ -6,7 +6,10 @@ use std::path::{Path, PathBuf};
 use super::publishing::{PublishError, Publishing};
 use crate::bag::{BagInfo, BagWriter};
 use crate::scene::RunError;
-use crate::scene::{run_scene_observed, Observer, RunOptions, RunSummary, Scene};
+use crate::scene::{
+    build_simulation, run_scene_observed, run_simulation_observed, Observer, RunOptions,
+    RunSummary, Scene,
+};
 
 /// A finished run and its bag.
 #[derive(Clone, Debug)]
@@ -91,14 +94,15 @@ pub fn record_run(
         bag: dir.to_path_buf(),
         cause: Box::new(source),
     };
-    let sim = crate::scene::Simulation::new(scene).map_err(|source| RecordError::Run {
+    // Built before the bag is created: a scene that fails to build, or a stop while it
+    // builds, leaves no bag behind.
+    let sim = build_simulation(scene, opts).map_err(|source| RecordError::Run {
         scene: scene_file(),
         cause: Box::new(source),
     })?;
     let writer = BagWriter::create(dir).map_err(|e| start(e.into()))?;
     let mut recorder = Publishing::new(scene, &sim, None, Some(writer)).map_err(start)?;
-    drop(sim);
-    let outcome = run_scene_observed(scene, opts, &mut Both(&mut recorder, observer));
+    let outcome = run_simulation_observed(scene, sim, opts, &mut Both(&mut recorder, observer));
     let finished = recorder.finish();
     let summary = outcome.map_err(|source| RecordError::RunRecorded {
         scene: scene_file(),

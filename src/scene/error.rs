@@ -27,6 +27,9 @@ pub enum RunError {
     /// The sand would not fit in memory (`super::memory`).
     #[error("{0}")]
     Memory(String),
+    /// A stop request (Ctrl-C, SIGTERM) arrived while the scene was being built.
+    #[error("stopped while {0}, before the first substep: nothing was simulated")]
+    StoppedLoading(&'static str),
     #[error("scene {0} has nothing to simulate (no `sand` or `robot` section)")]
     Empty(String),
     #[error(transparent)]

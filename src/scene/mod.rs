@@ -19,7 +19,10 @@ use crate::config_error::ConfigError;
 
 pub use config::SceneConfig;
 pub use error::{ObserverError, RunError};
-pub use run::{run_scene, run_scene_observed, NoObserver, Observer, RunOptions, RunSummary};
+pub use run::{
+    build_simulation, run_scene, run_scene_observed, run_simulation_observed, NoObserver, Observer,
+    RunOptions, RunSummary,
+};
 pub use simulation::{LegWrench, LinkPose, Simulation, Terrain};
 
 /// A scene that cannot be loaded or built; names the file and the field.

@@ -78,11 +78,26 @@ pub fn run_scene_observed(
     opts: &RunOptions,
     observer: &mut dyn Observer,
 ) -> Result<RunSummary, RunError> {
-    let config = &scene.config;
-    let mut sim = Simulation::new(scene)?;
-    if let Some(stop) = &opts.stop {
-        sim.stop_on(stop.clone());
+    run_simulation_observed(scene, build_simulation(scene, opts)?, opts, observer)
+}
+
+/// The scene's simulation at time 0, its build stopped by `opts.stop` and its substeps polling
+/// it.
+pub fn build_simulation(scene: &Scene, opts: &RunOptions) -> Result<Simulation, RunError> {
+    match &opts.stop {
+        Some(stop) => Simulation::new_unless(scene, stop),
+        None => Simulation::new(scene),
     }
+}
+
+/// [`run_scene_observed`] for the scene's simulation already built ([`build_simulation`]).
+pub fn run_simulation_observed(
+    scene: &Scene,
+    mut sim: Simulation,
+    opts: &RunOptions,
+    observer: &mut dyn Observer,
+) -> Result<RunSummary, RunError> {
+    let config = &scene.config;
     for line in sim.bed_shortfalls() {
         eprintln!("warning: {}: sand bed: {line}", scene.file.display());
     }

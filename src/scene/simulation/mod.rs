@@ -63,12 +63,25 @@ pub struct Simulation {
 impl Simulation {
     /// Builds the scene's terrain and robot at time 0.
     pub fn new(scene: &Scene) -> Result<Self, RunError> {
+        Self::new_unless(scene, &Arc::new(AtomicBool::new(false)))
+    }
+
+    /// [`Simulation::new`], looking at `stop` between the stages of the build (the robot, the
+    /// sand's fill, the coupling): once it is set, the build ends with
+    /// [`RunError::StoppedLoading`]. The simulation built polls it every substep.
+    pub fn new_unless(scene: &Scene, stop: &Arc<AtomicBool>) -> Result<Self, RunError> {
+        let unless_stopped = |stage: &'static str| match stop.load(Ordering::Relaxed) {
+            true => Err(RunError::StoppedLoading(stage)),
+            false => Ok(()),
+        };
         super::memory::check(scene)?;
         let config = &scene.config;
+        unless_stopped("loading the robot")?;
         let robot = match &config.robot {
             Some(cfg) => Some(Box::new(RobotSim::new(cfg, config.gravity_m_s2)?)),
             None => None,
         };
+        unless_stopped("filling the sand")?;
         let terrain = match (&robot, config.terrain.model) {
             (Some(robot), TerrainModel::Rft) => {
                 // The `sand` section is not simulated: no solver, no particles.
@@ -79,6 +92,7 @@ impl Simulation {
             }
             _ => match scene.build_solver() {
                 Some(solver) => {
+                    unless_stopped("coupling the robot to the sand")?;
                     Terrain::Sand(Box::new(sand_terrain(scene, solver, robot.as_deref())?))
                 }
                 None if robot.is_some() => Terrain::RigidGround,
@@ -91,7 +105,7 @@ impl Simulation {
             leg_loads: LegLoads::default(),
             steps: 0,
             particle_steps: 0,
-            stop: Arc::new(AtomicBool::new(false)),
+            stop: stop.clone(),
         })
     }
 
@@ -104,20 +118,14 @@ impl Simulation {
         }
     }
 
-    /// Polls `stop` every substep from now on: once it is set, [`Simulation::advance_to`]
-    /// returns after the substep under way, short of its target.
-    pub fn stop_on(&mut self, stop: Arc<AtomicBool>) {
-        self.stop = stop;
-    }
-
-    /// The stop request polled every substep (given to [`Simulation::stop_on`]; a request
+    /// The stop request polled every substep (given to [`Simulation::new_unless`]; a request
     /// of its own, never set, otherwise).
     pub fn stop_request(&self) -> Arc<AtomicBool> {
         self.stop.clone()
     }
 
     /// Advances to `target_s` seconds of simulated time (no-op if already there), or less if
-    /// a stop is requested ([`Simulation::stop_on`]).
+    /// a stop is requested ([`Simulation::new_unless`]).
     pub fn advance_to(&mut self, target_s: f64) -> Result<(), RunError> {
         let Some(robot) = self.robot.as_deref_mut() else {
             let Terrain::Sand(sand) = &mut self.terrain else {
