@@ -26,19 +26,19 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import dataclass
 
 from cyclonedds.core import Policy, Qos
 from cyclonedds.domain import DomainParticipant
-from cyclonedds.idl import IdlStruct
-from cyclonedds.idl.annotations import final
-import cyclonedds.idl.types as t
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
 CRATE_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+# The ROS 2 wire types of the tests' DDS peer.
+sys.path.insert(0, os.path.join(CRATE_DIR, "tests", "python"))
+from dds_peer import Clock, Float64  # noqa: E402
+
 CYCLONE_LOOPBACK = (
     '<CycloneDDS><Domain Id="any"><General><Interfaces><NetworkInterface name="lo"/>'
     "</Interfaces></General></Domain></CycloneDDS>"
@@ -57,25 +57,6 @@ SAMPLE_INTERVAL_S = 1.0
 SETTLED_AFTER_WALL_S = 60.0
 # The bound the figure is compared with (%).
 FLAT_WITHIN_PERCENT = 5.0
-
-
-@final
-@dataclass
-class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
-    sec: t.int32
-    nanosec: t.uint32
-
-
-@final
-@dataclass
-class Clock(IdlStruct, typename="rosgraph_msgs::msg::dds_::Clock_"):
-    clock: Time
-
-
-@final
-@dataclass
-class Float64(IdlStruct, typename="std_msgs::msg::dds_::Float64_"):
-    data: t.float64
 
 
 def resident_kib(pid):
