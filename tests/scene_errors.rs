@@ -47,6 +47,49 @@ fn unknown_key() {
     );
 }
 
+/// The in-cone viscosity is set one way: as a viscosity or as a relaxation time.
+#[test]
+fn a_viscosity_and_a_relaxation_time_are_refused_together() {
+    let e = error_of(
+        SCENE,
+        &[
+            "sand.materials.sand.elastic_viscosity_pa_s=50",
+            "sand.materials.sand.elastic_relaxation_s=7.35e-5",
+        ],
+    );
+    assert_names(
+        &e,
+        &[
+            "scenes/test.yaml",
+            "sand.materials.sand.elastic_relaxation_s",
+            "not both",
+        ],
+    );
+}
+
+/// A relaxation time gives the viscosity the shear modulus times it: the shipped robot scene's
+/// 7.35e-5 s is 50 Pa s at its 1.7685 MPa (Poisson 0.3), and a third of E a third of that.
+#[test]
+fn the_relaxation_time_scales_the_viscosity_with_the_stiffness() {
+    use sandstep::mpm::material::Constitutive;
+    let viscosity = |overrides: &[&str]| {
+        let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
+        let scene = Scene::load(Path::new("config/robot_on_sand.yaml"), &overrides).unwrap();
+        let solver = scene.build_solver().unwrap();
+        match &solver.materials[0].model {
+            Constitutive::DruckerPrager(dp) => dp.elastic_viscosity_pa_s,
+            other => panic!("sand is Drucker-Prager, not {other:?}"),
+        }
+    };
+    let shipped = viscosity(&["sand.bodies.0.box={min_m: [0, 0, -0.02], max_m: [0.02, 0.02, 0]}"]);
+    assert!((shipped - 50.0).abs() < 0.01, "{shipped} Pa s");
+    let soft = viscosity(&[
+        "sand.bodies.0.box={min_m: [0, 0, -0.02], max_m: [0.02, 0.02, 0]}",
+        "sand.materials.sand.youngs_modulus_pa=5.895e5",
+    ]);
+    assert!((soft - 50.0 / 3.0).abs() < 0.01, "{soft} Pa s");
+}
+
 #[test]
 fn out_of_range_values() {
     for (set, field) in [
@@ -84,6 +127,10 @@ fn out_of_range_values() {
         (
             "sand.materials.sand.elastic_viscosity_pa_s=.inf",
             "sand.materials.sand.elastic_viscosity_pa_s",
+        ),
+        (
+            "sand.materials.sand.elastic_relaxation_s=-1e-4",
+            "sand.materials.sand.elastic_relaxation_s",
         ),
         (
             "sand.domain.walls.z_min={friction: -1}",

@@ -159,6 +159,7 @@ pub fn validate(scene: &Scene) -> Result<(), SceneError> {
                 poisson_ratio,
                 friction_angle_deg,
                 elastic_viscosity_pa_s,
+                elastic_relaxation_s,
                 ..
             } => {
                 if !(*friction_angle_deg > 0.0 && *friction_angle_deg < 90.0) {
@@ -172,6 +173,24 @@ pub fn validate(scene: &Scene) -> Result<(), SceneError> {
                         field("elastic_viscosity_pa_s"),
                         format!("{elastic_viscosity_pa_s} must be a finite viscosity >= 0 (Pa s)"),
                     ));
+                }
+                if let Some(tau) = elastic_relaxation_s {
+                    if !(*tau >= 0.0 && tau.is_finite()) {
+                        return Err(scene.invalid(
+                            field("elastic_relaxation_s"),
+                            format!("{tau} must be a finite time >= 0 (s)"),
+                        ));
+                    }
+                    if *elastic_viscosity_pa_s != 0.0 {
+                        return Err(scene.invalid(
+                            field("elastic_relaxation_s"),
+                            format!(
+                                "set the in-cone viscosity one way: elastic_relaxation_s \
+                                 ({tau} s) or elastic_viscosity_pa_s \
+                                 ({elastic_viscosity_pa_s} Pa s), not both"
+                            ),
+                        ));
+                    }
                 }
                 (density_kg_m3, youngs_modulus_pa, poisson_ratio)
             }
@@ -396,15 +415,18 @@ fn constitutive(m: &MaterialConfig) -> Constitutive {
             friction_angle_deg,
             volume_correction,
             elastic_viscosity_pa_s,
+            elastic_relaxation_s,
             ..
-        } => Constitutive::DruckerPrager(DruckerPrager {
-            elastic_viscosity_pa_s,
-            ..DruckerPrager::new(
-                Lame::from_young_poisson(youngs_modulus_pa, poisson_ratio),
-                friction_angle_deg.to_radians(),
-                volume_correction,
-            )
-        }),
+        } => {
+            let lame = Lame::from_young_poisson(youngs_modulus_pa, poisson_ratio);
+            Constitutive::DruckerPrager(DruckerPrager {
+                elastic_viscosity_pa_s: match elastic_relaxation_s {
+                    Some(tau_s) => lame.mu * tau_s,
+                    None => elastic_viscosity_pa_s,
+                },
+                ..DruckerPrager::new(lame, friction_angle_deg.to_radians(), volume_correction)
+            })
+        }
         MaterialConfig::FixedCorotated {
             youngs_modulus_pa,
             poisson_ratio,

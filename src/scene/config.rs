@@ -294,6 +294,11 @@ pub enum MaterialConfig {
         /// not flow. Default 0.
         #[serde(default)]
         elastic_viscosity_pa_s: f32,
+        /// The in-cone viscosity as a relaxation time (s), >= 0, instead of
+        /// `elastic_viscosity_pa_s`: the viscosity is the shear modulus times it, so it damps
+        /// the same share of the elastic response whatever `youngs_modulus_pa`. Default none.
+        #[serde(default)]
+        elastic_relaxation_s: Option<f32>,
     },
     /// Fixed-corotated elasticity (Stomakhin et al. 2012), for elastic test bodies.
     FixedCorotated {
