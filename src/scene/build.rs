@@ -168,11 +168,13 @@ pub fn validate(scene: &Scene) -> Result<(), SceneError> {
                         format!("{friction_angle_deg} must be in (0, 90) degrees"),
                     ));
                 }
-                if !(*elastic_viscosity_pa_s >= 0.0 && elastic_viscosity_pa_s.is_finite()) {
-                    return Err(scene.invalid(
-                        field("elastic_viscosity_pa_s"),
-                        format!("{elastic_viscosity_pa_s} must be a finite viscosity >= 0 (Pa s)"),
-                    ));
+                if let Some(eta) = elastic_viscosity_pa_s {
+                    if !(*eta >= 0.0 && eta.is_finite()) {
+                        return Err(scene.invalid(
+                            field("elastic_viscosity_pa_s"),
+                            format!("{eta} must be a finite viscosity >= 0 (Pa s)"),
+                        ));
+                    }
                 }
                 if let Some(tau) = elastic_relaxation_s {
                     if !(*tau >= 0.0 && tau.is_finite()) {
@@ -181,13 +183,13 @@ pub fn validate(scene: &Scene) -> Result<(), SceneError> {
                             format!("{tau} must be a finite time >= 0 (s)"),
                         ));
                     }
-                    if *elastic_viscosity_pa_s != 0.0 {
+                    if let Some(eta) = elastic_viscosity_pa_s {
                         return Err(scene.invalid(
                             field("elastic_relaxation_s"),
                             format!(
-                                "set the in-cone viscosity one way: elastic_relaxation_s \
-                                 ({tau} s) or elastic_viscosity_pa_s \
-                                 ({elastic_viscosity_pa_s} Pa s), not both"
+                                "set the in-cone viscosity one way, elastic_relaxation_s \
+                                 ({tau} s) or elastic_viscosity_pa_s ({eta} Pa s), not both \
+                                 (`elastic_relaxation_s=null` clears the one a scene sets)"
                             ),
                         ));
                     }
@@ -422,7 +424,7 @@ fn constitutive(m: &MaterialConfig) -> Constitutive {
             Constitutive::DruckerPrager(DruckerPrager {
                 elastic_viscosity_pa_s: match elastic_relaxation_s {
                     Some(tau_s) => lame.mu * tau_s,
-                    None => elastic_viscosity_pa_s,
+                    None => elastic_viscosity_pa_s.unwrap_or(0.0),
                 },
                 ..DruckerPrager::new(lame, friction_angle_deg.to_radians(), volume_correction)
             })

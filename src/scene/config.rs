@@ -291,9 +291,9 @@ pub enum MaterialConfig {
         #[serde(default = "yes")]
         volume_correction: bool,
         /// Viscosity of the sand inside its yield cone (Pa s), >= 0: damps elastic vibration,
-        /// not flow. Default 0.
+        /// not flow. Default none (0).
         #[serde(default)]
-        elastic_viscosity_pa_s: f32,
+        elastic_viscosity_pa_s: Option<f32>,
         /// The in-cone viscosity as a relaxation time (s), >= 0, instead of
         /// `elastic_viscosity_pa_s`: the viscosity is the shear modulus times it, so it damps
         /// the same share of the elastic response whatever `youngs_modulus_pa`. Default none.
