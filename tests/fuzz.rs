@@ -107,16 +107,41 @@ const VALUES: &[&str] = &[
     "-0",
 ];
 
-/// Loads `text` as a scene with `overrides`; if it loads, builds it and takes one frame.
+/// Wall time a fuzzed scene may step for before it is stopped (s): an override such as
+/// `sand.solver.max_dt_s=1e-30` or `output.frame_interval_s=1e30` asks for a frame of
+/// endless substeps, which is a slow input, not a panic. A hang guard, asserting nothing.
+const STEP_FOR_AT_MOST_S: u64 = 2;
+
+/// Loads `text` as a scene with `overrides`; if it loads, builds it and takes one frame (or
+/// what of it [`STEP_FOR_AT_MOST_S`] allows, through the simulation's stop request).
 fn load_build_and_step(file: &str, text: &str, overrides: &[String]) {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::{mpsc, Arc};
+    use std::time::Duration;
+
     let Ok(scene) = Scene::from_yaml(text, Path::new(file), overrides) else {
         return;
     };
-    let Ok(mut sim) = Simulation::new(&scene) else {
+    let stop = Arc::new(AtomicBool::new(false));
+    let Ok(mut sim) = Simulation::new_unless(&scene, &stop) else {
         return;
+    };
+    let (stepped, done) = mpsc::channel::<()>();
+    let guard = {
+        let stop = stop.clone();
+        std::thread::spawn(move || {
+            if done
+                .recv_timeout(Duration::from_secs(STEP_FOR_AT_MOST_S))
+                .is_err()
+            {
+                stop.store(true, Ordering::Relaxed);
+            }
+        })
     };
     let first_frame_s = scene.config.output.frame_interval_s;
     let _ = sim.advance_to(first_frame_s);
+    let _ = stepped.send(());
+    guard.join().unwrap();
 }
 
 /// Cases per property: `PROPTEST_CASES` for a longer search, else [`DEFAULT_CASES`].
