@@ -179,9 +179,9 @@ fn a_stop_while_loading_ends_the_build_before_the_fill() {
         stop: Some(Arc::new(AtomicBool::new(true))),
         ..Default::default()
     };
-    let error = record_run(&scene, &opts, Some(&bag), &mut NoObserver)
-        .err()
-        .expect("the stop ends the build");
+    let Err(error) = record_run(&scene, &opts, Some(&bag), &mut NoObserver) else {
+        panic!("the stop ends the build");
+    };
     let RecordError::Run { cause, .. } = &error else {
         panic!("a build error, not {error}");
     };
