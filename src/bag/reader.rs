@@ -3,7 +3,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use super::chunks::{believable_prefix, messages};
+use super::chunks::messages;
 use super::metadata::{MetadataFileIn, SERIALIZATION_FORMAT, STORAGE_IDENTIFIER};
 use super::{BagError, TopicInfo, METADATA_FILE_NAME};
 use crate::msgs::{from_cdr, MessageType, RosMessage};
@@ -271,14 +271,8 @@ fn read_mcap(
     data: &mut BTreeMap<String, TopicData>,
 ) -> Result<Option<String>, BagError> {
     let bytes = std::fs::read(path).map_err(|e| BagError::io(path, e))?;
-    if bytes.starts_with(mcap::MAGIC) {
-        if let (readable, Some(problem)) = believable_prefix(&bytes) {
-            let read = read_unfinished_mcap(path, &bytes[..readable], data)?;
-            return Ok(Some(format!("{problem}; {read}")));
-        }
-        if !bytes.ends_with(mcap::MAGIC) {
-            return read_unfinished_mcap(path, &bytes, data).map(Some);
-        }
+    if bytes.starts_with(mcap::MAGIC) && !bytes.ends_with(mcap::MAGIC) {
+        return read_unfinished_mcap(path, &bytes, data).map(Some);
     }
     for message in messages(&bytes, false) {
         let message = message.map_err(|e| BagError::mcap(path, e))?;
@@ -298,7 +292,8 @@ fn read_mcap(
 }
 
 /// The messages of an unfinished MCAP file, read from its start up to the first record that
-/// is cut off (the chunk being written when its writer died); says what was left unread.
+/// is cut off (the chunk being written when its writer died) or damaged; says what was left
+/// unread and why.
 fn read_unfinished_mcap(
     path: &Path,
     bytes: &[u8],
@@ -306,13 +301,16 @@ fn read_unfinished_mcap(
 ) -> Result<String, BagError> {
     let mut read = 0u64;
     for message in messages(bytes, true) {
-        let Ok(message) = message else {
-            return Ok(format!(
-                "{} is unfinished (its writer was killed?): read {read} messages from its \
-                 complete chunks, the rest of the file is cut off; `sandstep bag reindex` \
-                 finishes it",
-                path.display()
-            ));
+        let message = match message {
+            Ok(message) => message,
+            Err(error) => {
+                return Ok(format!(
+                    "{} is unfinished (its writer was killed?): read {read} messages from its \
+                     complete chunks, the rest of the file is cut off or damaged ({error}); \
+                     `sandstep bag reindex` finishes it",
+                    path.display()
+                ))
+            }
         };
         topic_of_channel(data, &message.channel, path)?
             .messages

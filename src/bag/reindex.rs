@@ -7,7 +7,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use super::chunks::{believable_prefix, messages};
+use super::chunks::messages;
 use super::metadata::{bag_metadata, Durability, QosProfile, TopicRecord};
 use super::reader::{full_type_name, single_mcap};
 use super::writer::{
@@ -43,7 +43,6 @@ struct Channel {
 pub fn reindex(dir: &Path) -> Result<Reindexed, BagError> {
     let mcap_path = single_mcap(dir)?;
     let bytes = std::fs::read(&mcap_path).map_err(|e| BagError::io(&mcap_path, e))?;
-    let (readable, _) = believable_prefix(&bytes);
     if bytes.ends_with(mcap::MAGIC) && dir.join(METADATA_FILE_NAME).exists() {
         return Err(BagError::Metadata {
             path: dir.to_path_buf(),
@@ -58,9 +57,9 @@ pub fn reindex(dir: &Path) -> Result<Reindexed, BagError> {
     let mut channels: BTreeMap<u16, Channel> = BTreeMap::new();
     let mut schemas: BTreeMap<u16, u16> = BTreeMap::new();
     let (mut message_count, mut time_bounds) = (0u64, None::<(u64, u64)>);
-    // Messages in file order; a chunk cut off by the kill ends the loop with an error and
-    // nothing of it is written.
-    for message in messages(&bytes[..readable], true).map_while(Result::ok) {
+    // Messages in file order; a chunk cut off by the kill (or damaged) ends the loop with an
+    // error and nothing of it is written.
+    for message in messages(&bytes, true).map_while(Result::ok) {
         let source = &message.channel;
         if let std::collections::btree_map::Entry::Vacant(entry) = channels.entry(source.id) {
             let schema_id = match &source.schema {
