@@ -118,7 +118,10 @@ fn a_fixed_step_beyond_cfl_blows_up_and_is_reported_the_adaptive_step_is_stable(
         particle,
         time_s,
         ..
-    } = &err;
+    } = &err
+    else {
+        panic!("a blow-up, not {err}");
+    };
     let message = err.to_string();
     println!("fixed 6e-4 s: {message}");
     assert!(*step < 800, "detected only at step {step}");

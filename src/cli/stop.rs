@@ -1,5 +1,6 @@
-//! Signals. Ctrl-C (SIGINT) and SIGTERM: the first asks the job to stop after its current
-//! substep and finish its outputs (bags, results, summary); a second one exits at once. Either
+//! Signals. Ctrl-C (SIGINT) and SIGTERM: the first asks the job to stop (inside the substep
+//! under way, `mpm::Solver::stop_on`) and finish its outputs (bags, results, summary); a second
+//! one exits at once. Either
 //! way the exit code follows the shell's convention, 128 plus the signal: 130 for SIGINT, 143
 //! for SIGTERM. SIGPIPE (output into a closed pipe) ends the process quietly.
 
@@ -19,7 +20,7 @@ const NO_SIGNAL: usize = 0;
 
 /// The stop request of this process: set by the first SIGINT or SIGTERM.
 struct StopRequest {
-    /// True once a stop signal arrived; the jobs poll it every substep.
+    /// True once a stop signal arrived; the jobs poll it every substep and inside substeps.
     flag: Arc<AtomicBool>,
     /// The first signal received, or [`NO_SIGNAL`].
     signal: Arc<AtomicUsize>,
@@ -53,8 +54,8 @@ pub fn stop_flag() -> anyhow::Result<Arc<AtomicBool>> {
     std::thread::spawn(move || {
         if let Some(signal) = signals.forever().next() {
             eprintln!(
-                "\n{}: stopping after this substep and finishing the outputs (again to quit at \
-                 once)",
+                "\n{}: stopping inside this substep and finishing the outputs (again to quit \
+                 at once)",
                 signal_name(signal).unwrap_or("signal")
             );
         }

@@ -87,6 +87,22 @@ impl Particles {
         self.position.is_empty()
     }
 
+    /// Makes room for `additional` more particles.
+    pub fn reserve(&mut self, additional: usize) {
+        self.position.reserve(additional);
+        self.velocity.reserve(additional);
+        self.affine.reserve(additional);
+        self.deformation.reserve(additional);
+        self.stress.reserve(additional);
+        self.svd_frame.reserve(additional);
+        self.cpic_tags.reserve(additional);
+        self.mass.reserve(additional);
+        self.volume.reserve(additional);
+        self.volume_correction.reserve(additional);
+        self.material.reserve(additional);
+        self.id.reserve(additional);
+    }
+
     /// Appends an undeformed particle with zero stress and zero affine velocity.
     pub fn push(&mut self, p: NewParticle) {
         let id = self.next_id;

@@ -53,7 +53,7 @@ pub struct NodeRunOptions {
     pub bag_dir: Option<PathBuf>,
     /// Where the node reports its simulated time, real-time factor and commands.
     pub progress: Progress,
-    /// Set by Ctrl-C / SIGTERM: stop after the current substep.
+    /// Set by Ctrl-C / SIGTERM: stop inside the current substep.
     pub stop: Arc<AtomicBool>,
 }
 

@@ -24,7 +24,7 @@ pub struct RunOptions {
     pub out_dir: Option<PathBuf>,
     /// Where the run reports its simulated time after every frame.
     pub progress: Progress,
-    /// Set (e.g. by a Ctrl-C handler) to stop after the current substep; the summary then
+    /// Set (e.g. by a Ctrl-C handler) to stop inside the current substep; the summary then
     /// covers the time simulated so far.
     pub stop: Option<Arc<AtomicBool>>,
 }
@@ -47,8 +47,9 @@ pub struct RunSummary {
     /// True when the run was stopped before its end (Ctrl-C).
     pub stopped_early: bool,
     /// SHA-256 of the final state's bits ([`Simulation::state_digest`]): equal digests, equal
-    /// runs.
-    pub state_digest: String,
+    /// runs. None for a run stopped early (its state is not a result, and hashing millions of
+    /// particles would hold up the stop for a second).
+    pub state_digest: Option<String>,
 }
 
 /// Something that looks at the simulation at every frame (and at time 0), e.g. a bag recorder.
@@ -285,7 +286,7 @@ impl RunSummary {
             stage_times_s,
             metrics,
             stopped_early,
-            state_digest: sim.state_digest(),
+            state_digest: (!stopped_early).then(|| sim.state_digest()),
         }
     }
 }

@@ -6,6 +6,8 @@
 //! also keeps a share of its own deviation from the grid's (Fei et al. 2021).
 
 use nalgebra::{Matrix3, Vector3};
+use std::sync::atomic::Ordering;
+
 use rayon::prelude::*;
 
 use super::cpic_grid::{add_impulses, CpicParticle, CpicTransfer, GridColours};
@@ -24,12 +26,13 @@ impl Solver {
     /// G2P over the awake particle blocks: velocity, velocity gradient (kept in
     /// `self.velocity_gradient` for the particle update), advection, the affine matrix, and
     /// the clamp into the domain, and the penalty against colliders that yield
-    /// ([`settle_penalty`]). Returns the momentum CPIC handed to each collider.
+    /// ([`settle_penalty`]). Returns the momentum CPIC handed to each collider, and, if a stop
+    /// request left blocks out, which blocks moved.
     pub(super) fn grid_to_particle(
         &mut self,
         dt: f32,
         colliders: &[ColliderMotion],
-    ) -> Vec<ColliderImpulse> {
+    ) -> (Vec<ColliderImpulse>, Option<Vec<bool>>) {
         let context = G2pContext {
             grid: &self.grid,
             colours: &self.colours,
@@ -49,23 +52,28 @@ impl Solver {
         };
         let blocks = &self.grid.particle_blocks;
         let instruction_set = self.instruction_set;
+        let stop = &*self.stop;
         self.velocity_gradient
             .resize(self.particles.len(), Matrix3::zeros());
         let views = G2pView::split(&mut self.particles, &mut self.velocity_gradient, blocks);
+        // A block that sees a stop request is left as it was (None).
         let per_block: Vec<_> = views
             .into_par_iter()
             .zip(blocks.par_iter())
             .map(|(view, pb)| {
-                instruction_set.dispatch(G2pBlock {
-                    cx: &context,
-                    view,
-                    pb,
+                (!stop.load(Ordering::Relaxed)).then(|| {
+                    instruction_set.dispatch(G2pBlock {
+                        cx: &context,
+                        view,
+                        pb,
+                    })
                 })
             })
             .collect();
+        let moved: Vec<bool> = per_block.iter().map(Option::is_some).collect();
         let mut impulses = Vec::new();
         let mut contacts = Vec::new();
-        for (block_impulses, block_contacts) in per_block {
+        for (block_impulses, block_contacts) in per_block.into_iter().flatten() {
             impulses = add_impulses(impulses, &block_impulses);
             contacts.extend(block_contacts);
         }
@@ -75,7 +83,8 @@ impl Solver {
             mass: &self.particles.mass,
         };
         settle_penalty(particles, colliders, &contacts, &mut impulses);
-        impulses
+        let torn = moved.contains(&false);
+        (impulses, torn.then_some(moved))
     }
 }
 

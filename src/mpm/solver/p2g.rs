@@ -4,6 +4,8 @@
 //! AFLIP the mass and momentum without the stress term go to a second grid as well.
 
 use nalgebra::{Matrix3, Vector3};
+use std::sync::atomic::Ordering;
+
 use rayon::prelude::*;
 
 use super::cpic_grid::{add_impulses, CpicParticle, CpicTransfer, GridColours};
@@ -69,13 +71,15 @@ impl Solver {
             kernel: self.settings.kernel,
         };
         let instruction_set = self.instruction_set;
+        let stop = &*self.stop;
         let mut impulses = Vec::new();
         for phase in 0..8 {
+            // After a stop request the grid is left half-filled: the substep is abandoned.
             let phase_impulses: Vec<Vec<ColliderImpulse>> = self
                 .grid
                 .particle_blocks
                 .par_iter()
-                .filter(|pb| pb.phase() == phase)
+                .filter(|pb| pb.phase() == phase && !stop.load(Ordering::Relaxed))
                 .map(|pb| instruction_set.dispatch(P2gBlock { cx: &context, pb }))
                 .filter(|i| !i.is_empty())
                 .collect();

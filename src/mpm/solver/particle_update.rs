@@ -30,8 +30,13 @@ impl Solver {
     /// Updates F, the plastic state and the stress of every awake particle from the velocity
     /// gradient G2P left in `self.velocity_gradient`, records each block's largest speed (for
     /// the next time step and sleeping sand) and fails on the first particle with a non-finite
-    /// state or a speed above `settings.blowup_speed_m_s`.
-    pub(super) fn update_particles(&mut self, dt: f32) -> Result<(), SimError> {
+    /// state or a speed above `settings.blowup_speed_m_s`. With `moved` (a stop request left
+    /// G2P part done), only the blocks G2P moved are updated, so every particle stays whole.
+    pub(super) fn update_particles(
+        &mut self,
+        dt: f32,
+        moved: Option<&[bool]>,
+    ) -> Result<(), SimError> {
         let blowup_speed_sq = self.settings.blowup_speed_m_s * self.settings.blowup_speed_m_s;
         let materials = &self.materials[..];
         let blocks = &self.grid.particle_blocks;
@@ -40,7 +45,9 @@ impl Solver {
         let checks = views
             .into_par_iter()
             .zip(blocks.par_iter())
-            .map(|(view, pb)| {
+            .enumerate()
+            .filter(|(b, _)| moved.is_none_or(|moved| moved[*b]))
+            .map(|(_, (view, pb))| {
                 instruction_set.dispatch(BlockUpdate {
                     view,
                     pb,
@@ -50,6 +57,9 @@ impl Solver {
                 })
             })
             .collect::<Vec<_>>();
+        if moved.is_some() {
+            return Ok(());
+        }
         if let Some(sleep) = &mut self.sleep {
             let speeds: Vec<f32> = checks.iter().map(|c| c.max_speed_sq.sqrt()).collect();
             sleep.record_speeds(blocks, &self.keys, &speeds, dt);

@@ -4,6 +4,9 @@
 
 use nalgebra::{Matrix3, Vector3};
 
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
 use super::*;
 use crate::mpm::grid::BLOCK_EDGE;
 use crate::mpm::kernel::{Kernel, Stencil};
@@ -43,10 +46,15 @@ pub(crate) fn settings(gravity: Vector3<f32>, walls: Walls) -> SolverSettings {
 
 /// A blob of particles with random velocities, affine matrices and symmetric stresses.
 fn random_solver(seed: u64, gravity: Vector3<f32>, walls: Walls) -> Solver {
+    random_solver_of(3000, seed, gravity, walls)
+}
+
+/// [`random_solver`] with `particles` particles.
+fn random_solver_of(particles: usize, seed: u64, gravity: Vector3<f32>, walls: Walls) -> Solver {
     let mut rng = SmallRng::seed_from_u64(seed);
     let mut s = Solver::new(settings(gravity, walls), vec![jelly()]);
     let mut r = |lo: f32, hi: f32| rng.random_range(lo..hi);
-    let new: Vec<NewParticle> = (0..3000)
+    let new: Vec<NewParticle> = (0..particles)
         .map(|_| NewParticle {
             position: Vector3::new(r(0.05, 0.35), r(0.05, 0.25), r(0.05, 0.25)),
             velocity: Vector3::new(r(-1.0, 1.0), r(-1.0, 1.0), r(-1.0, 1.0)),
@@ -249,4 +257,83 @@ fn sparse_grid_matches_a_dense_reference_grid() {
     }
     assert!(dx_max < 1e-6, "positions differ by {dx_max} m");
     assert!(dv_max < 1e-3, "velocities differ by {dv_max} m/s");
+}
+
+/// The state of each particle by persistent id: position, velocity and deformation gradient.
+fn states_by_id(s: &Solver) -> Vec<(Vector3<f32>, Vector3<f32>, Matrix3<f32>)> {
+    let p = &s.particles;
+    let mut states = vec![Default::default(); p.len()];
+    for i in 0..p.len() {
+        states[p.id[i] as usize] = (p.position[i], p.velocity[i], p.deformation[i]);
+    }
+    states
+}
+
+/// A stop request that arrives inside a substep (from another thread, at whatever stage the
+/// substep is in) ends it with every particle whole: each one's state is, bit for bit, the
+/// state of an unstopped solver at the last whole substep or at the next one, and the clock
+/// says the last whole substep. A solver torn inside G2P steps no further. The stop lands
+/// where the thread's timing puts it; attempts go on until one has landed inside G2P (about
+/// half a substep's time is G2P and the particle update).
+#[test]
+fn a_stop_inside_a_substep_leaves_every_particle_whole() {
+    const PARTICLES: usize = 40_000;
+    const MOST_ATTEMPTS: u64 = 40;
+    let walls = Walls::all(Wall::Slip);
+    let gravity = Vector3::new(0.0, 0.0, -9.81);
+    let new_solver = || random_solver_of(PARTICLES, 3, gravity, walls);
+    let mut torn_seen = false;
+    for attempt in 0..MOST_ATTEMPTS {
+        let mut stopped = new_solver();
+        let stop = Arc::new(AtomicBool::new(false));
+        stopped.stop_on(stop.clone());
+        let request = {
+            let stop = stop.clone();
+            std::thread::spawn(move || {
+                std::thread::sleep(std::time::Duration::from_micros(5_000 + 1_700 * attempt));
+                stop.store(true, Ordering::Relaxed);
+            })
+        };
+        stopped.advance_to(1.0).expect("a stop is not a failure");
+        request.join().unwrap();
+        let whole_steps = stopped.steps;
+
+        let mut reference = new_solver();
+        for _ in 0..whole_steps {
+            reference.substep().unwrap();
+        }
+        assert_eq!(
+            stopped.time_s, reference.time_s,
+            "the clock of the last whole substep"
+        );
+        let before = states_by_id(&reference);
+        reference.substep().unwrap();
+        let after = states_by_id(&reference);
+        let state = states_by_id(&stopped);
+        let moved_on = (0..PARTICLES)
+            .filter(|&id| {
+                assert!(
+                    state[id] == before[id] || state[id] == after[id],
+                    "particle {id} is neither at step {whole_steps} nor at the next"
+                );
+                state[id] != before[id]
+            })
+            .count();
+        match stopped.substep() {
+            Err(SimError::StoppedMidTransfer { moved, blocks, .. }) => {
+                assert!(moved < blocks, "{moved} of {blocks} blocks moved");
+                assert_eq!(moved_on > 0, moved > 0, "{moved_on} particles moved on");
+                torn_seen = true;
+            }
+            Err(SimError::Stopped { .. }) => assert_eq!(moved_on, 0, "nothing moved"),
+            other => panic!("a stopped solver steps no further: {other:?}"),
+        }
+        if torn_seen {
+            break;
+        }
+    }
+    assert!(
+        torn_seen,
+        "no stop landed inside G2P in {MOST_ATTEMPTS} attempts"
+    );
 }
