@@ -88,16 +88,17 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string(&summary)?);
         return Ok(());
     }
+    // A run stopped inside its first substep simulated nothing: no rate to give.
+    let rates = match summary.steps {
+        0 => "nothing simulated".to_string(),
+        _ => format!(
+            "{:.2} s wall per sim s, {:.3e} particle-steps/s",
+            summary.wall_time_per_sim_s, summary.particle_steps_per_s
+        ),
+    };
     println!(
-        "{}: {} particles, {} steps, {:.3} s simulated in {:.2} s wall \
-         ({:.2} s wall per sim s, {:.3e} particle-steps/s)",
-        summary.scene,
-        summary.particles,
-        summary.steps,
-        summary.sim_time_s,
-        summary.wall_time_s,
-        summary.wall_time_per_sim_s,
-        summary.particle_steps_per_s
+        "{}: {} particles, {} steps, {:.3} s simulated in {:.2} s wall ({rates})",
+        summary.scene, summary.particles, summary.steps, summary.sim_time_s, summary.wall_time_s,
     );
     if summary.stopped_early {
         println!(
