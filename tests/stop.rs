@@ -1,7 +1,7 @@
 //! Stopping a run: SIGTERM and Ctrl-C (SIGINT) are honoured inside a frame (the stop request is
-//! polled every substep and inside substeps, not between frames), the bag is finished, the summary says where the
-//! run stopped, and the exit code is 128 plus the signal (143, 130). Output into a closed pipe
-//! ends the process quietly instead of panicking.
+//! polled every substep and inside substeps, not between frames), the bag is finished, the
+//! summary says where the run stopped, and the exit code is 128 plus the signal (143, 130).
+//! Output into a closed pipe ends the process quietly instead of panicking.
 
 use std::path::Path;
 use std::process::{Child, Command, Stdio};

@@ -432,7 +432,7 @@ impl Scene {
         for body in self.bodies() {
             let material = names.iter().position(|n| **n == body.material).unwrap() as u16;
             let density = sand.materials[&body.material].density_kg_m3();
-            let filled = fill_body_unless(&body, sand.dx_m, density, material, stop)?;
+            let filled = fill_body(&body, sand.dx_m, density, material, stop)?;
             match &x_range {
                 None => particles.extend(filled),
                 Some(r) => {
@@ -523,15 +523,11 @@ fn body_bounds(body: &BodyConfig) -> (Vector3<f32>, Vector3<f32>, Inside) {
     }
 }
 
-/// Particles on a regular lattice of `n^3` per cell (aligned with the grid), inside the body.
-pub fn fill_body(body: &BodyConfig, dx: f32, density: f32, material: u16) -> Vec<NewParticle> {
-    fill_body_unless(body, dx, density, material, &AtomicBool::new(false)).expect("never stopped")
-}
-
-/// [`fill_body`], or [`FillStopped`] once `stop` is set: it is looked at before every lattice
-/// plane, so a stop waits for one plane of particles (the default bed at dx = 2.5 mm, 6.8 M
-/// particles, fills in 0.3 s).
-pub fn fill_body_unless(
+/// Particles on a regular lattice of `n^3` per cell (aligned with the grid), inside the body;
+/// or [`FillStopped`] once `stop` is set: it is looked at before every lattice plane, so a
+/// stop waits for one plane of particles (the default bed at dx = 2.5 mm, 6.8 M particles,
+/// fills in 0.3 s).
+pub fn fill_body(
     body: &BodyConfig,
     dx: f32,
     density: f32,

@@ -70,7 +70,10 @@ impl Solver {
                 })
             })
             .collect();
-        let moved: Vec<bool> = per_block.iter().map(Option::is_some).collect();
+        let moved = per_block
+            .iter()
+            .any(Option::is_none)
+            .then(|| per_block.iter().map(Option::is_some).collect());
         let mut impulses = Vec::new();
         let mut contacts = Vec::new();
         for (block_impulses, block_contacts) in per_block.into_iter().flatten() {
@@ -83,8 +86,7 @@ impl Solver {
             mass: &self.particles.mass,
         };
         settle_penalty(particles, colliders, &contacts, &mut impulses);
-        let torn = moved.contains(&false);
-        (impulses, torn.then_some(moved))
+        (impulses, moved)
     }
 }
 

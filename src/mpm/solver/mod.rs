@@ -97,7 +97,7 @@ pub struct Solver {
     /// Substeps taken.
     pub steps: u64,
     pub stage_times: StageTimes,
-    /// A stop request (Ctrl-C), looked at between the stages of a substep and between the
+    /// A stop request (Ctrl-C), looked at when a substep starts, before G2P, and between the
     /// particle blocks of P2G and G2P ([`Solver::stop_on`]).
     stop: Arc<AtomicBool>,
     /// The stop that tore a substep inside G2P, once one has: the sand is then stepped no more.
@@ -145,9 +145,9 @@ impl Solver {
     /// ends with [`SimError::Stopped`] (seen before G2P: nothing moved) or
     /// [`SimError::StoppedMidTransfer`] (seen during G2P: the blocks done moved on by the
     /// substep, each particle whole, and the solver steps no further), and
-    /// [`Solver::advance_to`] returns early. It is looked at between stages and between particle
-    /// blocks of P2G and G2P: a stop waits for the sort and grid allocation at most (0.04 s at
-    /// 6.8 M particles on 2 cores, `docs/ros.md`).
+    /// [`Solver::advance_to`] returns early. It is looked at when a substep starts, before G2P,
+    /// and between the particle blocks of P2G and G2P: a stop waits for the sort and grid
+    /// allocation at most (0.04 s at 6.8 M particles on 2 cores, `docs/ros.md`).
     pub fn stop_on(&mut self, stop: Arc<AtomicBool>) {
         self.stop = stop;
     }
@@ -171,8 +171,6 @@ impl Solver {
 
     /// Adds particles (undeformed, stress free).
     pub fn add_particles(&mut self, new: impl IntoIterator<Item = NewParticle>) {
-        let new = new.into_iter();
-        self.particles.reserve(new.size_hint().0);
         for p in new {
             self.max_speed_m_s = self.max_speed_m_s.max(p.velocity.norm());
             self.particles.push(p);
@@ -324,14 +322,11 @@ impl Solver {
         let mut times = std::mem::take(&mut self.stage_times);
         times.time(Stage::Cpic, || self.update_particle_tags());
         let p2g_impulses = times.time(Stage::P2g, || self.particle_to_grid(dt, colliders));
-        let stopped = self.unless_stopped("p2g");
-        let stopped = stopped.and_then(|()| {
-            times.time(Stage::GridUpdate, || self.update_grid(dt, colliders));
-            self.unless_stopped("the grid update")
-        });
-        if stopped.is_err() {
+        times.time(Stage::GridUpdate, || self.update_grid(dt, colliders));
+        // P2G skips its blocks once a stop is requested; the grid is then abandoned here.
+        if let Err(stopped) = self.unless_stopped("the transfer to the grid") {
             self.stage_times = times;
-            stopped?;
+            return Err(stopped);
         }
         // Light bodies yield to the sand they meet within the substep (see `yielded`).
         let colliders: Vec<ColliderMotion> = colliders
