@@ -16,8 +16,8 @@ mod node;
 
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
-pub use instruction_set::{InstructionSet, SimdError, WithLanes, SIMD_ENV_VAR};
-pub use node::F4;
+pub use instruction_set::{InstructionSet, SimdError, WithLanes, WithNodes, SIMD_ENV_VAR};
+pub use node::{Node, NodePair, SsePair, F4};
 
 /// `[e(0), e(1), e(2)]` for `array3!(k => e(k))`, written out in place. Lane code builds its
 /// small arrays with this instead of closures: a closure is a function of its own, and where the

@@ -3,8 +3,12 @@
 //! bits (module `simd`), so the choice changes speed only.
 
 use std::fmt;
+use std::marker::PhantomData;
 
-use super::{Lanes, Wide};
+#[cfg(target_arch = "x86_64")]
+use super::node::AvxPair;
+use super::node::SsePair;
+use super::{Lanes, NodePair, Wide};
 
 /// Environment variable that forces an instruction set: `avx512`, `avx2`, `portable` or `auto`
 /// (the default: the fastest available).
@@ -38,6 +42,15 @@ pub trait WithLanes {
     fn run<const N: usize>(self) -> Self::Output
     where
         Wide<N>: Lanes;
+}
+
+/// Work on grid nodes (P2G, G2P), run by [`InstructionSet::dispatch_nodes`] with the
+/// instruction set's [`NodePair`].
+pub trait WithNodes {
+    type Output;
+    /// Runs with node pairs `P`; must be `#[inline(always)]` to be compiled with the
+    /// instruction set's features.
+    fn run<P: NodePair>(self) -> Self::Output;
 }
 
 /// An instruction set that cannot be used here.
@@ -142,6 +155,34 @@ impl InstructionSet {
             InstructionSet::Avx2(v3) => pulp::Simd::vectorize(v3, WithFeatures::<W, LANES>(work)),
             InstructionSet::Portable => work.run::<LANES>(),
         }
+    }
+
+    /// Runs `work` compiled for this instruction set, with its [`NodePair`]: one AVX register
+    /// with AVX2 or AVX-512, two SSE registers on the baseline.
+    pub fn dispatch_nodes<W: WithNodes>(self, work: W) -> W::Output {
+        match self {
+            #[cfg(target_arch = "x86_64")]
+            InstructionSet::Avx512(v4) => {
+                pulp::Simd::vectorize(v4, NodesWithFeatures::<W, AvxPair>(work, PhantomData))
+            }
+            #[cfg(target_arch = "x86_64")]
+            InstructionSet::Avx2(v3) => {
+                pulp::Simd::vectorize(v3, NodesWithFeatures::<W, AvxPair>(work, PhantomData))
+            }
+            InstructionSet::Portable => work.run::<SsePair>(),
+        }
+    }
+}
+
+/// `work` with node pairs `P`, as `pulp` runs it: inlined into a function compiled with the
+/// instruction set's target features.
+struct NodesWithFeatures<W, P>(W, PhantomData<P>);
+
+impl<W: WithNodes, P: NodePair> pulp::WithSimd for NodesWithFeatures<W, P> {
+    type Output = W::Output;
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) -> W::Output {
+        self.0.run::<P>()
     }
 }
 

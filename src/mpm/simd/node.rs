@@ -2,10 +2,11 @@
 //! x86-64 (part of its baseline, so always available) and a plain array elsewhere. P2G and G2P
 //! add and scale whole nodes with it: two multiplies and two adds per node and particle.
 //!
-//! Its width is the node's, not the instruction set's: a wider register would hold the nodes
-//! of two or four particles at once (the next lever, `docs/performance.md`). Written with
-//! intrinsics because the compiler's vectorisation of `[f32; 4]` arithmetic made G2P 25 %
-//! slower (measured 2026-12-03).
+//! Its width is the node's, not the instruction set's. With AFLIP a node of the grid and the
+//! same node of the transferred grid share their weights, and [`NodePair`] holds both: one AVX
+//! register where the CPU has AVX2. Written with intrinsics because the compiler's
+//! vectorisation of `[f32; 4]` arithmetic made G2P 25 % slower (measured 2026-12-03), and its
+//! `[f32; 8]` pairs stayed scalar (2026-12-06).
 
 use std::ops::{Add, Mul};
 
@@ -55,3 +56,134 @@ impl Mul for F4 {
 /// Portable fallback of the same lanes.
 #[cfg(not(target_arch = "x86_64"))]
 pub type F4 = super::Wide<4>;
+
+/// What P2G and G2P do with a node: [`F4`], or a pair of nodes ([`NodePair`]).
+pub trait Node: Copy + Add<Output = Self> + Mul<Output = Self> {
+    fn splat(x: f32) -> Self;
+}
+
+impl Node for F4 {
+    #[inline(always)]
+    fn splat(x: f32) -> Self {
+        F4::splat(x)
+    }
+}
+
+/// Two grid nodes' components side by side, `[p_x, p_y, p_z, m | p~_x, p~_y, p~_z, m~]`: a node
+/// of the grid and the same node of AFLIP's transferred grid, scattered and gathered with the
+/// same weights in one pass. Each half's arithmetic is [`F4`]'s, so the same bits as two
+/// passes. The type is the instruction set's ([`super::WithNodes`]): one AVX register where
+/// the CPU has AVX2 ([`AvxPair`]), two SSE registers otherwise ([`SsePair`]).
+pub trait NodePair: Node {
+    fn from_halves(low: F4, high: F4) -> Self;
+    /// The grid's node.
+    fn low(self) -> F4;
+    /// The transferred grid's node.
+    fn high(self) -> F4;
+}
+
+/// [`NodePair`] as two [`F4`]: the baseline's.
+#[derive(Clone, Copy, Debug)]
+pub struct SsePair {
+    low: F4,
+    high: F4,
+}
+
+impl Add for SsePair {
+    type Output = SsePair;
+    #[inline(always)]
+    fn add(self, o: SsePair) -> SsePair {
+        SsePair {
+            low: self.low + o.low,
+            high: self.high + o.high,
+        }
+    }
+}
+
+impl Mul for SsePair {
+    type Output = SsePair;
+    #[inline(always)]
+    fn mul(self, o: SsePair) -> SsePair {
+        SsePair {
+            low: self.low * o.low,
+            high: self.high * o.high,
+        }
+    }
+}
+
+impl Node for SsePair {
+    #[inline(always)]
+    fn splat(x: f32) -> Self {
+        Self::from_halves(F4::splat(x), F4::splat(x))
+    }
+}
+
+impl NodePair for SsePair {
+    #[inline(always)]
+    fn from_halves(low: F4, high: F4) -> Self {
+        SsePair { low, high }
+    }
+    #[inline(always)]
+    fn low(self) -> F4 {
+        self.low
+    }
+    #[inline(always)]
+    fn high(self) -> F4 {
+        self.high
+    }
+}
+
+/// [`NodePair`] as one AVX register. Its intrinsics need AVX, so it is private to this module
+/// tree: only [`super::InstructionSet::dispatch_nodes`] names it, and only where the CPU has
+/// AVX2 (its code is then compiled with those features). Measured with `sandstep bench`
+/// (`docs/performance.md`): G2P 1.23 and P2G 1.35 times the particles per second of two
+/// passes of [`F4`]; [`SsePair`] there gained nothing, and eight plain lanes (`Wide<8>`, left
+/// scalar by the compiler) lost a third.
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy, Debug)]
+pub(super) struct AvxPair(std::arch::x86_64::__m256);
+
+// SAFETY (every `unsafe` block below): an `AvxPair` exists only inside
+// `InstructionSet::dispatch_nodes`'s AVX2 and AVX-512 arms, run under `pulp`'s proof that the
+// CPU has AVX2; none of the intrinsics dereferences a pointer.
+#[cfg(target_arch = "x86_64")]
+impl Add for AvxPair {
+    type Output = AvxPair;
+    #[inline(always)]
+    fn add(self, o: AvxPair) -> AvxPair {
+        AvxPair(unsafe { std::arch::x86_64::_mm256_add_ps(self.0, o.0) })
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Mul for AvxPair {
+    type Output = AvxPair;
+    #[inline(always)]
+    fn mul(self, o: AvxPair) -> AvxPair {
+        AvxPair(unsafe { std::arch::x86_64::_mm256_mul_ps(self.0, o.0) })
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Node for AvxPair {
+    #[inline(always)]
+    fn splat(x: f32) -> Self {
+        AvxPair(unsafe { std::arch::x86_64::_mm256_set1_ps(x) })
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl NodePair for AvxPair {
+    #[inline(always)]
+    fn from_halves(low: F4, high: F4) -> Self {
+        AvxPair(unsafe { std::arch::x86_64::_mm256_set_m128(high.0, low.0) })
+    }
+    #[inline(always)]
+    fn low(self) -> F4 {
+        F4(unsafe { std::arch::x86_64::_mm256_castps256_ps128(self.0) })
+    }
+    #[inline(always)]
+    fn high(self) -> F4 {
+        F4(unsafe { std::arch::x86_64::_mm256_extractf128_ps(self.0, 1) })
+    }
+}

@@ -41,18 +41,22 @@ impl GridColours {
         }
     }
 
+    /// Whether any grid block of `pb`'s arena has colours: a collider is near.
+    pub(super) fn near(&self, pb: &ParticleBlock) -> bool {
+        !self.blocks.is_empty()
+            && pb
+                .arena_blocks
+                .iter()
+                .any(|&b| self.of_block[b as usize] != NO_COLOUR)
+    }
+
     /// The 6x6x6 colour arena of a particle block, or None if none of its nodes is coloured.
     pub(super) fn arena(
         &self,
         pb: &ParticleBlock,
         slots: &[ArenaSlot; ARENA_NODES],
     ) -> Option<Box<[NodeColour; ARENA_NODES]>> {
-        if self.blocks.is_empty()
-            || pb
-                .arena_blocks
-                .iter()
-                .all(|&b| self.of_block[b as usize] == NO_COLOUR)
-        {
+        if !self.near(pb) {
             return None;
         }
         let mut arena = Box::new([NodeColour::default(); ARENA_NODES]);

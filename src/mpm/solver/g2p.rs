@@ -20,7 +20,7 @@ use crate::mpm::cpic::{
 use crate::mpm::grid::{node_in_arena, ArenaSlot, Block, ParticleBlock, SparseGrid, ARENA_NODES};
 use crate::mpm::kernel::{Kernel, Stencil};
 use crate::mpm::particles::Particles;
-use crate::mpm::simd::{Lanes, Wide, WithLanes, F4};
+use crate::mpm::simd::{Node, NodePair, WithNodes, F4};
 
 impl Solver {
     /// G2P over the awake particle blocks: velocity, velocity gradient (kept in
@@ -62,7 +62,7 @@ impl Solver {
             .zip(blocks.par_iter())
             .map(|(view, pb)| {
                 (!stop.load(Ordering::Relaxed)).then(|| {
-                    instruction_set.dispatch(G2pBlock {
+                    instruction_set.dispatch_nodes(G2pBlock {
                         cx: &context,
                         view,
                         pb,
@@ -209,14 +209,11 @@ struct G2pBlock<'a> {
     pb: &'a ParticleBlock,
 }
 
-impl WithLanes for G2pBlock<'_> {
+impl WithNodes for G2pBlock<'_> {
     type Output = (Vec<ColliderImpulse>, Vec<PenaltyContact>);
     #[inline(always)]
-    fn run<const N: usize>(self) -> Self::Output
-    where
-        Wide<N>: Lanes,
-    {
-        grid_to_particle_block(self.cx, self.view, self.pb)
+    fn run<P: NodePair>(self) -> Self::Output {
+        grid_to_particle_block::<P>(self.cx, self.view, self.pb)
     }
 }
 
@@ -225,7 +222,7 @@ impl WithLanes for G2pBlock<'_> {
 /// Returns the CPIC impulses on the colliders (empty where no particle is near one) and the
 /// penalty contacts with colliders that yield, to be settled after G2P.
 #[inline(always)]
-fn grid_to_particle_block(
+fn grid_to_particle_block<P: NodePair>(
     cx: &G2pContext,
     view: G2pView,
     pb: &ParticleBlock,
@@ -246,6 +243,14 @@ fn grid_to_particle_block(
     } = *cx;
     let arena = load_arena(&grid.blocks, slots, pb);
     let arena_transferred = flip.map(|f| load_arena(f.transferred_velocity, slots, pb));
+    // Away from colliders AFLIP gathers both grids in one pass.
+    let arena_pairs = arena_transferred.as_ref().map(|transferred| {
+        let mut pairs = [P::splat(0.0); ARENA_NODES];
+        for (a, pair) in pairs.iter_mut().enumerate() {
+            *pair = P::from_halves(arena[a], transferred[a]);
+        }
+        pairs
+    });
     let mut impulses = Vec::new();
     let mut contacts = Vec::new();
     let colour_arena = colours.arena(pb, slots);
@@ -269,14 +274,21 @@ fn grid_to_particle_block(
             mass: view.mass[i],
             tags,
         };
-        let (mut v, b) = match &cpic {
-            Some(cx) => {
+        // The grid's velocity and gradient sums, and away from colliders with AFLIP the
+        // transferred grid's.
+        let ((mut v, b), bulk_transferred) = match (&cpic, &arena_pairs) {
+            (Some(cx), _) => {
                 if impulses.is_empty() {
                     impulses = vec![ColliderImpulse::default(); colliders.len()];
                 }
-                gather_cpic(&arena, cx, &s, base, &particle, &mut impulses)
+                let gathered = gather_cpic(&arena, cx, &s, base, &particle, &mut impulses);
+                (gathered, None)
             }
-            None => gather(&arena, &s, base),
+            (None, Some(pairs)) => {
+                let (grid, transferred) = gather_pair(pairs, &s, base);
+                (grid, Some(transferred))
+            }
+            (None, None) => (gather(&arena, &s, base), None),
         };
         // C_p = sum w v_i (x_i - x_p)^T D^-1, with offsets in cells.
         let c = scale_columns(&b, &(s.inverse_moment / dx));
@@ -289,24 +301,25 @@ fn grid_to_particle_block(
         let kept = match (flip, &arena_transferred) {
             (Some(f), Some(transferred)) if cpic.is_none() || band_as_bulk => {
                 let inverse_moment = s.inverse_moment / (dx * dx);
-                let kept = match &cpic {
-                    None => {
-                        let (v_transferred, b_transferred) = gather(transferred, &s, base);
+                let kept = match (&cpic, bulk_transferred) {
+                    (None, Some((v_transferred, b_transferred))) => {
                         let c_transferred = scale_columns(&b_transferred, &(s.inverse_moment / dx));
-                        KeptDeviation::new(
+                        Some(KeptDeviation::new(
                             f.shares.bulk,
                             view.velocity[i] - v_transferred,
                             view.affine[i] - c_transferred,
                             &inverse_moment,
-                        )
+                        ))
                     }
-                    Some(cx) => {
+                    (Some(cx), _) => {
                         let compatible = gather_compatible(transferred, cx, &s, base, tags);
                         let deviation = compatible.deviation(&particle, &view.affine[i], dx);
-                        KeptDeviation::of_velocity(f.shares.band, deviation)
+                        Some(KeptDeviation::of_velocity(f.shares.band, deviation))
                     }
+                    // (Not met: with AFLIP the bulk gathers both grids.)
+                    (None, None) => None,
                 };
-                Some(kept.with_spin_for_advection(&v, dt, &inverse_moment))
+                kept.map(|k| k.with_spin_for_advection(&v, dt, &inverse_moment))
             }
             _ => None,
         };
@@ -354,22 +367,43 @@ fn load_arena(
     arena
 }
 
-/// Gathers `(sum w_i v_i, sum w_i v_i d_i^T)` over the 27 stencil nodes, `d_i` in cells. The
-/// outer product is summed per axis: `sum w v (i, j, k)^T - (sum w v) fx^T`. Arena nodes are
-/// SIMD vectors `[v_x, v_y, v_z, m]`; the mass lane is summed along and ignored.
+/// `(sum w_i v_i, sum w_i v_i d_i^T)` (m/s, m/s in cells) gathered at a particle.
+type VelocityAndGradient = (Vector3<f32>, Matrix3<f32>);
+
+/// Gathers `(sum w_i v_i, sum w_i v_i d_i^T)` over the 27 stencil nodes, `d_i` in cells. Arena
+/// nodes are SIMD vectors `[v_x, v_y, v_z, m]`; the mass lane is summed along and ignored.
 #[inline(always)]
-fn gather(
-    arena: &[F4; ARENA_NODES],
+fn gather(arena: &[F4; ARENA_NODES], s: &Stencil, base: [usize; 3]) -> VelocityAndGradient {
+    velocity_and_gradient(gather_sums(arena, s, base), &s.fx)
+}
+
+/// [`gather`] from the grid and AFLIP's transferred grid at once (one node pair per node):
+/// `(grid, transferred)`.
+#[inline(always)]
+fn gather_pair<P: NodePair>(
+    arena: &[P; ARENA_NODES],
     s: &Stencil,
     base: [usize; 3],
-) -> (Vector3<f32>, Matrix3<f32>) {
-    let zero = F4::splat(0.0);
-    let w_k = s.weights[2].map(F4::splat);
+) -> (VelocityAndGradient, VelocityAndGradient) {
+    let sums = gather_sums(arena, s, base);
+    (
+        velocity_and_gradient(sums.map(P::low), &s.fx),
+        velocity_and_gradient(sums.map(P::high), &s.fx),
+    )
+}
+
+/// `[sum w v, sum w v i, sum w v j, sum w v k]` over the 27 stencil nodes, `(i, j, k)` the
+/// node's index in the stencil: the outer product `sum w v d^T` is summed per axis and
+/// shifted by the particle's offset in [`velocity_and_gradient`].
+#[inline(always)]
+fn gather_sums<N: Node>(arena: &[N; ARENA_NODES], s: &Stencil, base: [usize; 3]) -> [N; 4] {
+    let zero = N::splat(0.0);
+    let w_k = s.weights[2].map(N::splat);
     let (mut v, mut by_i, mut by_j, mut by_k) = (zero, zero, zero, zero);
     for i in 0..3 {
         let mut v_i = zero;
         for j in 0..3 {
-            let w_ij = F4::splat(s.weights[0][i] * s.weights[1][j]);
+            let w_ij = N::splat(s.weights[0][i] * s.weights[1][j]);
             let row = node_in_arena(base[0] + i, base[1] + j, base[2]);
             let v0 = arena[row] * w_k[0];
             let v1 = arena[row + 1] * w_k[1];
@@ -377,19 +411,27 @@ fn gather(
             let v_ij = (v0 + v1 + v2) * w_ij;
             by_k = by_k + (v1 + v2 + v2) * w_ij;
             v_i = v_i + v_ij;
-            by_j = by_j + v_ij * F4::splat(j as f32);
+            by_j = by_j + v_ij * N::splat(j as f32);
         }
         v = v + v_i;
-        by_i = by_i + v_i * F4::splat(i as f32);
+        by_i = by_i + v_i * N::splat(i as f32);
     }
+    [v, by_i, by_j, by_k]
+}
+
+/// `(sum w v, sum w v d^T)` from [`gather_sums`]: `sum w v (i, j, k)^T - (sum w v) fx^T`, with
+/// `fx` the particle's offset from the stencil's first node (cells).
+#[inline(always)]
+fn velocity_and_gradient(sums: [F4; 4], fx: &Vector3<f32>) -> VelocityAndGradient {
     let column = |c: F4| {
         let [x, y, z, _] = c.to_array();
         Vector3::new(x, y, z)
     };
-    let v = column(v);
-    let b =
-        Matrix3::from_columns(&[column(by_i), column(by_j), column(by_k)]) - v * s.fx.transpose();
-    (v, b)
+    let [v, by_i, by_j, by_k] = sums.map(column);
+    (
+        v,
+        Matrix3::from_columns(&[by_i, by_j, by_k]) - v * fx.transpose(),
+    )
 }
 
 /// [`gather`] with CPIC: an incompatible node contributes the ghost velocity instead of its own.

@@ -19,7 +19,7 @@ use crate::mpm::grid::{
 };
 use crate::mpm::kernel::{Kernel, Stencil};
 use crate::mpm::particles::Particles;
-use crate::mpm::simd::{Lanes, Wide, WithLanes, F4};
+use crate::mpm::simd::{array3, Node, NodePair, WithNodes, F4};
 
 impl Solver {
     /// P2G: each particle block scatters into a private 6x6x6 arena, and arenas are added to the
@@ -80,7 +80,7 @@ impl Solver {
                 .particle_blocks
                 .par_iter()
                 .filter(|pb| pb.phase() == phase && !stop.load(Ordering::Relaxed))
-                .map(|pb| instruction_set.dispatch(P2gBlock { cx: &context, pb }))
+                .map(|pb| instruction_set.dispatch_nodes(P2gBlock { cx: &context, pb }))
                 .filter(|i| !i.is_empty())
                 .collect();
             for block in &phase_impulses {
@@ -111,6 +111,45 @@ struct P2gContext<'a> {
     kernel: Kernel,
 }
 
+/// What particle `p` scatters, before the weights.
+struct ParticleTerms {
+    /// Position (m).
+    x: Vector3<f32>,
+    s: Stencil,
+    /// Mass (kg).
+    m: f32,
+    /// Momentum (kg m/s).
+    momentum: Vector3<f32>,
+    /// `m_p C_p dx` (kg m/s): the affine momentum per cell of offset.
+    q_transfer: Matrix3<f32>,
+    /// `Q_p` for offsets in cells: the stress impulse and `q_transfer`.
+    q_cells: Matrix3<f32>,
+}
+
+impl P2gContext<'_> {
+    #[inline(always)]
+    fn particle(&self, p: usize) -> ParticleTerms {
+        let particles = self.particles;
+        let x = particles.position[p];
+        let s = Stencil::of(self.kernel, self.grid.to_grid(&x));
+        let m = particles.mass[p];
+        let momentum = particles.velocity[p] * m;
+        let q_transfer = particles.affine[p] * (m * self.dx);
+        let q_cells = scale_columns(
+            &particles.stress[p],
+            &(s.inverse_moment * self.stress_scale * particles.volume[p]),
+        ) + q_transfer;
+        ParticleTerms {
+            x,
+            s,
+            m,
+            momentum,
+            q_transfer,
+            q_cells,
+        }
+    }
+}
+
 /// P2G of one particle block, as the work of [`crate::mpm::simd::InstructionSet::dispatch`]:
 /// compiled with the instruction set's features (VEX encoding with AVX2; the same bits, as no
 /// product is fused).
@@ -121,14 +160,56 @@ struct P2gBlock<'a> {
     pb: &'a ParticleBlock,
 }
 
-impl WithLanes for P2gBlock<'_> {
+impl WithNodes for P2gBlock<'_> {
     type Output = Vec<ColliderImpulse>;
     #[inline(always)]
-    fn run<const N: usize>(self) -> Self::Output
-    where
-        Wide<N>: Lanes,
-    {
-        particle_to_grid_block(self.cx, self.pb)
+    fn run<P: NodePair>(self) -> Self::Output {
+        let cx = self.cx;
+        match cx.transferred_blocks {
+            Some(transferred) if !cx.colours.near(self.pb) => {
+                particle_to_grid_pairs::<P>(cx, self.pb, transferred);
+                Vec::new()
+            }
+            _ => particle_to_grid_block(cx, self.pb),
+        }
+    }
+}
+
+/// P2G of a particle block away from colliders with AFLIP: each particle scatters to the grid
+/// and to the transferred grid in one pass of node pairs ([`NodePair`]), with the same weights
+/// and the same bits as [`particle_to_grid_block`]'s two passes.
+#[inline(always)]
+fn particle_to_grid_pairs<P: NodePair>(
+    cx: &P2gContext,
+    pb: &ParticleBlock,
+    transferred_blocks: &SharedBlocks,
+) {
+    let P2gContext {
+        slots,
+        grid_blocks,
+        shares,
+        ..
+    } = *cx;
+    let mut arena = [P::splat(0.0); ARENA_NODES];
+    let b = shares.bulk;
+    for p in pb.start..pb.end {
+        let t = cx.particle(p);
+        let grid_terms = NodeTerms::of(&t.s, t.m, t.momentum, &t.q_cells);
+        let transferred_terms = NodeTerms::of(&t.s, t.m * b, t.momentum * b, &(t.q_transfer * b));
+        let terms = NodeTerms {
+            at_base: P::from_halves(grid_terms.at_base, transferred_terms.at_base),
+            columns: array3!(c => P::from_halves(grid_terms.columns[c], transferred_terms.columns[c])),
+        };
+        scatter(&mut arena, &t.s, local_base(&t.s, pb), &terms);
+    }
+    let (mut low, mut high) = ([F4::splat(0.0); ARENA_NODES], [F4::splat(0.0); ARENA_NODES]);
+    for (a, pair) in arena.iter().enumerate() {
+        (low[a], high[a]) = (pair.low(), pair.high());
+    }
+    // SAFETY: as in `particle_to_grid_block`.
+    unsafe {
+        grid_blocks.add_arena(&low, pb, slots);
+        transferred_blocks.add_arena(&high, pb, slots);
     }
 }
 
@@ -138,7 +219,6 @@ impl WithLanes for P2gBlock<'_> {
 #[inline(always)]
 fn particle_to_grid_block(cx: &P2gContext, pb: &ParticleBlock) -> Vec<ColliderImpulse> {
     let P2gContext {
-        grid,
         particles,
         colours,
         colliders,
@@ -146,10 +226,9 @@ fn particle_to_grid_block(cx: &P2gContext, pb: &ParticleBlock) -> Vec<ColliderIm
         grid_blocks,
         transferred_blocks,
         dx,
-        stress_scale,
         shares,
         band_as_bulk,
-        kernel,
+        ..
     } = *cx;
     let mut arena = [F4::splat(0.0); ARENA_NODES];
     let mut transferred_arena = transferred_blocks
@@ -158,15 +237,14 @@ fn particle_to_grid_block(cx: &P2gContext, pb: &ParticleBlock) -> Vec<ColliderIm
     let colour_arena = colours.arena(pb, slots);
     let mut block_impulses = Vec::new();
     for p in pb.start..pb.end {
-        let x = particles.position[p];
-        let s = Stencil::of(kernel, grid.to_grid(&x));
-        let m = particles.mass[p];
-        let momentum = particles.velocity[p] * m;
-        let q_transfer = particles.affine[p] * (m * dx);
-        let q_cells = scale_columns(
-            &particles.stress[p],
-            &(s.inverse_moment * stress_scale * particles.volume[p]),
-        ) + q_transfer;
+        let ParticleTerms {
+            x,
+            s,
+            m,
+            momentum,
+            q_transfer,
+            q_cells,
+        } = cx.particle(p);
         let base = local_base(&s, pb);
         let tags = particles.cpic_tags[p];
         match &colour_arena {
@@ -198,11 +276,16 @@ fn particle_to_grid_block(cx: &P2gContext, pb: &ParticleBlock) -> Vec<ColliderIm
                 );
             }
             _ => {
-                scatter(&mut arena, &s, base, m, momentum, &q_cells);
+                scatter(
+                    &mut arena,
+                    &s,
+                    base,
+                    &NodeTerms::of(&s, m, momentum, &q_cells),
+                );
                 if let Some(transferred) = &mut transferred_arena {
                     let b = shares.bulk;
-                    let (m, momentum) = (m * b, momentum * b);
-                    scatter(transferred, &s, base, m, momentum, &(q_transfer * b));
+                    let terms = NodeTerms::of(&s, m * b, momentum * b, &(q_transfer * b));
+                    scatter(transferred, &s, base, &terms);
                 }
             }
         }
@@ -217,30 +300,47 @@ fn particle_to_grid_block(cx: &P2gContext, pb: &ParticleBlock) -> Vec<ColliderIm
     block_impulses
 }
 
+/// One particle's mass and momentum as [`scatter`] spreads them: at the stencil's first node,
+/// and the change per node along each axis.
+struct NodeTerms<N> {
+    /// `[m_p v_p - Q_p fx, m_p]`: what the node at offset zero gets before its weight.
+    at_base: N,
+    /// The columns of `Q_p` (cells) with a zero mass lane: what one node further along each
+    /// axis adds.
+    columns: [N; 3],
+}
+
+impl NodeTerms<F4> {
+    /// For mass `mass` (kg), momentum `momentum` (kg m/s) and `q_cells`, Q_p scaled for
+    /// offsets in cells.
+    #[inline(always)]
+    fn of(s: &Stencil, mass: f32, momentum: Vector3<f32>, q_cells: &Matrix3<f32>) -> Self {
+        let p = momentum - q_cells * s.fx;
+        NodeTerms {
+            at_base: F4::from_array([p.x, p.y, p.z, mass]),
+            columns: array3!(c => F4::from_array([q_cells[(0, c)], q_cells[(1, c)], q_cells[(2, c)], 0.0])),
+        }
+    }
+}
+
 /// Adds one particle's mass and momentum `w_ip (m_p v_p + Q_p (x_i - x_p))` to its 27 arena
-/// nodes; `q_cells` is Q_p scaled for offsets in cells. With `x_i - x_p = (i, j, k) - fx` (cells)
-/// the affine term is built up one axis at a time, and a node's four components
-/// `[p_x, p_y, p_z, m]` are one SIMD vector: two multiplies and two adds per node.
+/// nodes. With `x_i - x_p = (i, j, k) - fx` (cells) the affine term is built up one axis at a
+/// time, and a node's four components `[p_x, p_y, p_z, m]` are one SIMD vector (or, for node
+/// pairs, eight): two multiplies and two adds per node.
 #[inline(always)]
-fn scatter(
-    arena: &mut [F4; ARENA_NODES],
+fn scatter<N: Node>(
+    arena: &mut [N; ARENA_NODES],
     s: &Stencil,
     base: [usize; 3],
-    mass: f32,
-    momentum: Vector3<f32>,
-    q_cells: &Matrix3<f32>,
+    terms: &NodeTerms<N>,
 ) {
-    // Columns of Q with a zero mass lane; the mass lane of `at_base` carries m_p.
-    let q =
-        [0, 1, 2].map(|c| F4::from_array([q_cells[(0, c)], q_cells[(1, c)], q_cells[(2, c)], 0.0]));
-    let p = momentum - q_cells * s.fx;
-    let at_base = F4::from_array([p.x, p.y, p.z, mass]);
-    let w_k = s.weights[2].map(F4::splat);
-    let mut p_i = at_base;
+    let q = terms.columns;
+    let w_k = s.weights[2].map(N::splat);
+    let mut p_i = terms.at_base;
     for i in 0..3 {
         let mut p_ij = p_i;
         for j in 0..3 {
-            let w_ij = F4::splat(s.weights[0][i] * s.weights[1][j]);
+            let w_ij = N::splat(s.weights[0][i] * s.weights[1][j]);
             let row = node_in_arena(base[0] + i, base[1] + j, base[2]);
             let p_ij0 = p_ij * w_ij;
             let q_k = q[2] * w_ij;
