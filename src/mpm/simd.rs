@@ -9,7 +9,8 @@
 //! path gives the same bits (`docs/determinism.md`; pinned in `tests/determinism.rs`).
 //!
 //! Used for many particles at once (the SVD and the constitutive update). The four components
-//! of a grid node in P2G and G2P are [`F4`] (`node.rs`).
+//! of a grid node in P2G and G2P are [`F4`], and a node of each of AFLIP's two grids together a
+//! [`NodePair`] (`node.rs`).
 
 mod instruction_set;
 mod node;
@@ -17,7 +18,7 @@ mod node;
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
 pub use instruction_set::{InstructionSet, SimdError, WithLanes, WithNodes, SIMD_ENV_VAR};
-pub use node::{Node, NodePair, SsePair, F4};
+pub use node::{Node, NodePair, F4};
 
 /// `[e(0), e(1), e(2)]` for `array3!(k => e(k))`, written out in place. Lane code builds its
 /// small arrays with this instead of closures: a closure is a function of its own, and where the

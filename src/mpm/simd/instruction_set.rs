@@ -159,6 +159,7 @@ impl InstructionSet {
 
     /// Runs `work` compiled for this instruction set, with its [`NodePair`]: one AVX register
     /// with AVX2 or AVX-512, two SSE registers on the baseline.
+    #[inline(always)]
     pub fn dispatch_nodes<W: WithNodes>(self, work: W) -> W::Output {
         match self {
             #[cfg(target_arch = "x86_64")]

@@ -69,11 +69,12 @@ impl Node for F4 {
     }
 }
 
-/// Two grid nodes' components side by side, `[p_x, p_y, p_z, m | p~_x, p~_y, p~_z, m~]`: a node
-/// of the grid and the same node of AFLIP's transferred grid, scattered and gathered with the
+/// Two grid node vectors side by side (`[p_x, p_y, p_z, m]` in P2G, `[v_x, v_y, v_z, m]` in
+/// G2P, then the same of the other grid): a node of the grid and the same node of AFLIP's
+/// transferred grid, scattered and gathered with the
 /// same weights in one pass. Each half's arithmetic is [`F4`]'s, so the same bits as two
 /// passes. The type is the instruction set's ([`super::WithNodes`]): one AVX register where
-/// the CPU has AVX2 ([`AvxPair`]), two SSE registers otherwise ([`SsePair`]).
+/// the CPU has AVX2 (`AvxPair`), two SSE registers otherwise (`SsePair`).
 pub trait NodePair: Node {
     fn from_halves(low: F4, high: F4) -> Self;
     /// The grid's node.
@@ -143,9 +144,9 @@ impl NodePair for SsePair {
 #[derive(Clone, Copy, Debug)]
 pub(super) struct AvxPair(std::arch::x86_64::__m256);
 
-// SAFETY (every `unsafe` block below): an `AvxPair` exists only inside
-// `InstructionSet::dispatch_nodes`'s AVX2 and AVX-512 arms, run under `pulp`'s proof that the
-// CPU has AVX2; none of the intrinsics dereferences a pointer.
+// SAFETY (every `unsafe` block below): an `AvxPair` is reachable only through
+// `InstructionSet::dispatch_nodes`'s AVX2 and AVX-512 arms, after `pulp`'s token proved that
+// the CPU has AVX2; none of the intrinsics dereferences a pointer.
 #[cfg(target_arch = "x86_64")]
 impl Add for AvxPair {
     type Output = AvxPair;

@@ -20,7 +20,7 @@ use crate::mpm::cpic::{
 use crate::mpm::grid::{node_in_arena, ArenaSlot, Block, ParticleBlock, SparseGrid, ARENA_NODES};
 use crate::mpm::kernel::{Kernel, Stencil};
 use crate::mpm::particles::Particles;
-use crate::mpm::simd::{Node, NodePair, WithNodes, F4};
+use crate::mpm::simd::{array3, Node, NodePair, WithNodes, F4};
 
 impl Solver {
     /// G2P over the awake particle blocks: velocity, velocity gradient (kept in
@@ -197,7 +197,8 @@ impl KeptDeviation {
     }
 }
 
-/// G2P of one particle block, as the work of [`crate::mpm::simd::InstructionSet::dispatch`]:
+/// G2P of one particle block, as the work of
+/// [`crate::mpm::simd::InstructionSet::dispatch_nodes`]:
 /// compiled with the instruction set's features (VEX encoding with AVX2; the same bits, as no
 /// product is fused).
 /// Only what is inlined gets them: the CPIC band's `gather_cpic`, `gather_compatible` and
@@ -243,14 +244,18 @@ fn grid_to_particle_block<P: NodePair>(
     } = *cx;
     let arena = load_arena(&grid.blocks, slots, pb);
     let arena_transferred = flip.map(|f| load_arena(f.transferred_velocity, slots, pb));
-    // Away from colliders AFLIP gathers both grids in one pass.
-    let arena_pairs = arena_transferred.as_ref().map(|transferred| {
-        let mut pairs = [P::splat(0.0); ARENA_NODES];
-        for (a, pair) in pairs.iter_mut().enumerate() {
-            *pair = P::from_halves(arena[a], transferred[a]);
+    // Away from colliders AFLIP gathers both grids in one pass. (No closure: one the
+    // compiler does not inline runs without the instruction set's features.)
+    let arena_pairs = match &arena_transferred {
+        Some(transferred) => {
+            let mut pairs = [P::splat(0.0); ARENA_NODES];
+            for (a, pair) in pairs.iter_mut().enumerate() {
+                *pair = P::from_halves(arena[a], transferred[a]);
+            }
+            Some(pairs)
         }
-        pairs
-    });
+        None => None,
+    };
     let mut impulses = Vec::new();
     let mut contacts = Vec::new();
     let colour_arena = colours.arena(pb, slots);
@@ -301,25 +306,26 @@ fn grid_to_particle_block<P: NodePair>(
         let kept = match (flip, &arena_transferred) {
             (Some(f), Some(transferred)) if cpic.is_none() || band_as_bulk => {
                 let inverse_moment = s.inverse_moment / (dx * dx);
-                let kept = match (&cpic, bulk_transferred) {
+                let deviation = match (&cpic, bulk_transferred) {
                     (None, Some((v_transferred, b_transferred))) => {
                         let c_transferred = scale_columns(&b_transferred, &(s.inverse_moment / dx));
-                        Some(KeptDeviation::new(
+                        KeptDeviation::new(
                             f.shares.bulk,
                             view.velocity[i] - v_transferred,
                             view.affine[i] - c_transferred,
                             &inverse_moment,
-                        ))
+                        )
                     }
                     (Some(cx), _) => {
                         let compatible = gather_compatible(transferred, cx, &s, base, tags);
                         let deviation = compatible.deviation(&particle, &view.affine[i], dx);
-                        Some(KeptDeviation::of_velocity(f.shares.band, deviation))
+                        KeptDeviation::of_velocity(f.shares.band, deviation)
                     }
-                    // (Not met: with AFLIP the bulk gathers both grids.)
-                    (None, None) => None,
+                    (None, None) => {
+                        unreachable!("with AFLIP the bulk gathers the transferred grid too")
+                    }
                 };
-                kept.map(|k| k.with_spin_for_advection(&v, dt, &inverse_moment))
+                Some(deviation.with_spin_for_advection(&v, dt, &inverse_moment))
             }
             _ => None,
         };
@@ -385,10 +391,10 @@ fn gather_pair<P: NodePair>(
     s: &Stencil,
     base: [usize; 3],
 ) -> (VelocityAndGradient, VelocityAndGradient) {
-    let sums = gather_sums(arena, s, base);
+    let [v, by_i, by_j, by_k] = gather_sums(arena, s, base);
     (
-        velocity_and_gradient(sums.map(P::low), &s.fx),
-        velocity_and_gradient(sums.map(P::high), &s.fx),
+        velocity_and_gradient([v.low(), by_i.low(), by_j.low(), by_k.low()], &s.fx),
+        velocity_and_gradient([v.high(), by_i.high(), by_j.high(), by_k.high()], &s.fx),
     )
 }
 
@@ -398,7 +404,7 @@ fn gather_pair<P: NodePair>(
 #[inline(always)]
 fn gather_sums<N: Node>(arena: &[N; ARENA_NODES], s: &Stencil, base: [usize; 3]) -> [N; 4] {
     let zero = N::splat(0.0);
-    let w_k = s.weights[2].map(N::splat);
+    let w_k = array3!(k => N::splat(s.weights[2][k]));
     let (mut v, mut by_i, mut by_j, mut by_k) = (zero, zero, zero, zero);
     for i in 0..3 {
         let mut v_i = zero;

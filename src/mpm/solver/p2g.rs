@@ -115,6 +115,7 @@ struct P2gContext<'a> {
 struct ParticleTerms {
     /// Position (m).
     x: Vector3<f32>,
+    /// Its stencil: weights and base node.
     s: Stencil,
     /// Mass (kg).
     m: f32,
@@ -122,7 +123,7 @@ struct ParticleTerms {
     momentum: Vector3<f32>,
     /// `m_p C_p dx` (kg m/s): the affine momentum per cell of offset.
     q_transfer: Matrix3<f32>,
-    /// `Q_p` for offsets in cells: the stress impulse and `q_transfer`.
+    /// `Q_p` for offsets in cells (kg m/s): the stress impulse and `q_transfer`.
     q_cells: Matrix3<f32>,
 }
 
@@ -150,7 +151,8 @@ impl P2gContext<'_> {
     }
 }
 
-/// P2G of one particle block, as the work of [`crate::mpm::simd::InstructionSet::dispatch`]:
+/// P2G of one particle block, as the work of
+/// [`crate::mpm::simd::InstructionSet::dispatch_nodes`]:
 /// compiled with the instruction set's features (VEX encoding with AVX2; the same bits, as no
 /// product is fused).
 /// Only what is inlined gets them: the CPIC band's `scatter_cpic` (`#[inline(never)]`) stays
@@ -335,7 +337,7 @@ fn scatter<N: Node>(
     terms: &NodeTerms<N>,
 ) {
     let q = terms.columns;
-    let w_k = s.weights[2].map(N::splat);
+    let w_k = array3!(k => N::splat(s.weights[2][k]));
     let mut p_i = terms.at_base;
     for i in 0..3 {
         let mut p_ij = p_i;
