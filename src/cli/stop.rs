@@ -1,7 +1,8 @@
 //! Signals. Ctrl-C (SIGINT) and SIGTERM: the first asks the job to stop (inside the substep
 //! under way, `mpm::Solver::stop_on`) and finish its outputs (bags, results, summary); a second
 //! one exits at once. Either way the exit code follows the shell's convention, 128 plus the
-//! signal: 130 for SIGINT, 143 for SIGTERM. SIGPIPE (output into a closed pipe) ends the process quietly.
+//! signal: 130 for SIGINT, 143 for SIGTERM. SIGPIPE (output into a closed pipe) ends the
+//! process quietly.
 
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, OnceLock};

@@ -71,10 +71,10 @@ impl Node for F4 {
 
 /// Two grid node vectors side by side (`[p_x, p_y, p_z, m]` in P2G, `[v_x, v_y, v_z, m]` in
 /// G2P, then the same of the other grid): a node of the grid and the same node of AFLIP's
-/// transferred grid, scattered and gathered with the
-/// same weights in one pass. Each half's arithmetic is [`F4`]'s, so the same bits as two
-/// passes. The type is the instruction set's ([`super::WithNodes`]): one AVX register where
-/// the CPU has AVX2 (`AvxPair`), two SSE registers otherwise (`SsePair`).
+/// transferred grid, scattered and gathered with the same weights in one pass. Each half's
+/// arithmetic is [`F4`]'s, so the same bits as two passes. The type is the instruction set's
+/// ([`super::WithNodes`]): one AVX register where the CPU has AVX2 (`AvxPair`), two SSE
+/// registers otherwise (`SsePair`).
 pub trait NodePair: Node {
     fn from_halves(low: F4, high: F4) -> Self;
     /// The grid's node.
