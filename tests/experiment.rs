@@ -40,22 +40,23 @@ const BED_HALF_WIDTH_M: f64 = 0.12;
 /// Measured gait cycles.
 const CYCLES: usize = 2;
 /// Largest tilt of the upright C-leg robot (deg). At this grid, five starts 2 mm apart tilt
-/// 25.1 +- 4.7 deg at most over the run (19.9 to 30.2; this test's start 25.8), 7 spreads
+/// 21.6 +- 3.9 deg at most over the run (17.4 to 27.8; this test's start 27.8), 8 spreads
 /// below the bound; a robot that tips over ends beyond 90 (137 to 175 in docs/experiment.md).
 ///
-/// The speeds, at the same five starts (2026-12-06, ninth session: the leg yielding as its
-/// multibody presents it, the CPIC penalty shared, `coupling.load_prediction: none`;
-/// `sandstep experiment` with this test's file plus `robot.initial_pose.position_m=[x, 0.0]`
-/// among the overrides, x = 0, 2, 4, 6, 8 mm): C-legs 0.155 +- 0.019 m/s (0.136 to 0.185),
-/// reversed 0.038 +- 0.010 (0.028 to 0.052), 4.1 times slower. This test's start (x = 0) is the
-/// C-legs' slowest and the reversed legs' fastest of the five: its checks sit 6.2 (C > 0.02
-/// m/s), 2.7 (C > 1.1 x reversed) and 3.0 (per cycle) spreads from their bounds (3.9, 3.9 at
-/// the mean of the five). With `load_prediction: last_substep`, the default until then, the
-/// C-legs walked 0.187 +- 0.019 and the margins were 8.9, 7.7 and 6.4.
+/// The speeds, at the same five starts (2026-12-06, thirteenth session: the leg yielding as
+/// its multibody presents it with its motor's impedance, `coupling.motor_impedance` true by
+/// default since then; `sandstep experiment` with this test's file plus
+/// `robot.initial_pose.position_m=[x, 0.0]` among the overrides, x = 0, 2, 4, 6, 8 mm):
+/// C-legs 0.178 +- 0.026 m/s (0.148 to 0.211), reversed 0.037 +- 0.012 (0.028 to 0.056), 4.8
+/// times slower. This test's start (x = 0) walks C 0.186, reversed 0.042: its checks sit 6.4
+/// (C > 0.02 m/s), 4.0 (C > 1.1 x reversed) and 4.5 (per cycle) spreads from their bounds.
+/// Without the motor's impedance (the default until then) the five starts walked C 0.150 +-
+/// 0.024 and reversed 0.034 +- 0.012 m/s (paired, the impedance adds +0.028 +- 0.017 and
+/// +0.003 +- 0.006: docs/speed-vs-accuracy.md).
 const MAX_C_LEG_TILT_DEG: f64 = 60.0;
 /// Spreads over those five starts on MPM (m/s, m/s, m/s, deg): C-leg speed, C - 1.1 x
 /// reversed, per-cycle C - reversed, C-leg tilt; for the printed margins.
-const MPM_SPREADS: [f64; 4] = [0.019, 0.029, 0.031, 4.7];
+const MPM_SPREADS: [f64; 4] = [0.026, 0.035, 0.034, 3.9];
 
 /// The settings this file's figures were measured with, beside dx = 1.25 cm: CFL 0.4, the whole
 /// bed, all sand awake, as `config/experiments/leg_curvature.yaml` runs (the shipped scene's

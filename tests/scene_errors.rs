@@ -347,3 +347,20 @@ fn motor_impedance_needs_the_articulated_leg() {
         ],
     );
 }
+
+/// The motor's impedance is the articulated leg's default; left unset, another leg yield
+/// runs without it instead of being refused.
+#[test]
+fn the_motors_impedance_is_the_articulated_legs_default() {
+    let coupling = |overrides: &[&str]| {
+        let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
+        let scene = Scene::load(Path::new("config/robot_on_sand.yaml"), &overrides).unwrap();
+        scene.validate().unwrap();
+        scene.config.coupling
+    };
+    let unset = "coupling.motor_impedance=null";
+    assert!(coupling(&[unset]).motor_impedance());
+    let leg = coupling(&[unset, "coupling.legs_yield_with=leg"]);
+    assert!(!leg.motor_impedance());
+    assert!(!coupling(&["coupling.motor_impedance=false"]).motor_impedance());
+}

@@ -290,12 +290,27 @@ impl RobotSim {
     /// Advances by one rapier step of `dt_s` seconds, whatever `max_dt_s`: for forces computed
     /// for exactly this step (the RFT terrain's implicit terms).
     pub fn single_step(&mut self, dt_s: f64) {
+        if self.begin_step(dt_s) {
+            self.finish_step(dt_s);
+        }
+    }
+
+    /// The first half of [`Self::single_step`]: sets rapier's step to `dt_s` and the motors'
+    /// targets and torque limits for it, moving nothing, so that a terrain's load computed
+    /// next meets the motors as that step will solve them. False (and nothing set) for a step
+    /// that is not positive.
+    pub fn begin_step(&mut self, dt_s: f64) -> bool {
         if dt_s.is_nan() || dt_s <= 0.0 {
-            return;
+            return false;
         }
         self.world.integration_parameters.dt = dt_s as f32;
         self.gait.advance(dt_s);
         self.drive_motors();
+        true
+    }
+
+    /// The second half of [`Self::single_step`]: the rapier step [`Self::begin_step`] set up.
+    pub fn finish_step(&mut self, dt_s: f64) {
         self.world.step();
         self.time_s += dt_s;
         self.record_step();

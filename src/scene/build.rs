@@ -59,7 +59,7 @@ pub fn validate(scene: &Scene) -> Result<(), SceneError> {
              stiff spring: docs/physics.md, CPIC step 7)",
         ));
     }
-    if c.coupling.motor_impedance
+    if c.coupling.motor_impedance == Some(true)
         && c.coupling.legs_yield_with != crate::coupling::LegYield::Articulated
     {
         return Err(scene.invalid(

@@ -436,9 +436,20 @@ pub struct CouplingConfig {
     pub load_prediction: crate::coupling::LoadPrediction,
     /// With `legs_yield_with: articulated`, a leg also yields with the impedance its motor
     /// presents over the step (rapier answers the sand with the motor within the step).
-    /// Default false.
+    /// Default true with `articulated`, not used (and refused if set true) with the other leg
+    /// yields; see [`Self::motor_impedance`].
     #[serde(default)]
-    pub motor_impedance: bool,
+    pub motor_impedance: Option<bool>,
+}
+
+impl CouplingConfig {
+    /// Whether a leg yields with its motor's impedance too: as set, else with the articulated
+    /// leg yield (the default since 2026-12-06: `docs/speed-vs-accuracy.md`, "The motor's
+    /// impedance becomes the default").
+    pub fn motor_impedance(&self) -> bool {
+        self.motor_impedance
+            .unwrap_or(self.legs_yield_with == crate::coupling::LegYield::Articulated)
+    }
 }
 
 fn default_method() -> crate::coupling::CouplingMethod {
@@ -466,7 +477,7 @@ impl Default for CouplingConfig {
             friction: default_sand_friction(),
             legs_yield_with: default_legs_yield_with(),
             load_prediction: default_load_prediction(),
-            motor_impedance: false,
+            motor_impedance: None,
         }
     }
 }

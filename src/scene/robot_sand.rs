@@ -45,7 +45,7 @@ pub fn robot_coupling(
         .with_load_prediction(cfg.load_prediction);
     Ok(match cfg.legs_yield_with {
         LegYield::Leg => coupling,
-        LegYield::Articulated if cfg.motor_impedance => coupling
+        LegYield::Articulated if cfg.motor_impedance() => coupling
             .with_articulation()
             .with_motor_impedance(world.integration_parameters.num_solver_iterations),
         LegYield::Articulated => coupling.with_articulation(),

@@ -116,15 +116,21 @@ impl Terrain {
         dt_s: f64,
         leg_loads: &mut LegLoads,
     ) -> Result<(), RunError> {
+        // The motors' settings for the step first: the sand's exchange reads them
+        // (`coupling.motor_impedance`).
+        if !robot.begin_step(dt_s) {
+            return Ok(());
+        }
         let impulses = self.load(robot, dt_s)?;
         // Moved to the hips before the step moves the links.
         leg_loads.add_step(robot, &impulses, dt_s);
-        robot.single_step(dt_s);
+        robot.finish_step(dt_s);
         Ok(())
     }
 
-    /// The terrain's load on the robot for a step of `dt_s` seconds, set as forces on its
-    /// bodies, and the impulse on each body it touched.
+    /// The terrain's load on the robot for the step of `dt_s` seconds that
+    /// [`RobotSim::begin_step`] set up, set as forces on its bodies, and the impulse on each
+    /// body it touched.
     fn load(&mut self, robot: &mut RobotSim, dt_s: f64) -> Result<Vec<BodyImpulse>, RunError> {
         let impulses = match self {
             Terrain::RigidGround => Vec::new(),
