@@ -70,6 +70,7 @@ const KEYS: &[&str] = &[
     "coupling.friction",
     "coupling.legs_yield_with",
     "coupling.load_prediction",
+    "coupling.motor_impedance",
     "output.frame_interval_s",
     "node.state_rate_hz",
     "node.name",

@@ -358,9 +358,9 @@ fn the_motors_impedance_is_the_articulated_legs_default() {
         scene.validate().unwrap();
         scene.config.coupling
     };
-    let unset = "coupling.motor_impedance=null";
-    assert!(coupling(&[unset]).motor_impedance());
-    let leg = coupling(&[unset, "coupling.legs_yield_with=leg"]);
+    assert!(coupling(&[]).motor_impedance());
+    let leg = coupling(&["coupling.legs_yield_with=leg"]);
     assert!(!leg.motor_impedance());
     assert!(!coupling(&["coupling.motor_impedance=false"]).motor_impedance());
+    assert!(coupling(&["coupling.motor_impedance=null"]).motor_impedance());
 }

@@ -78,7 +78,10 @@ pub fn main() -> ExitCode {
         eprintln!("error: {e:#}");
     }
     match (stop::received_signal(), result) {
-        (Some(signal), _) => ExitCode::from(stop::exit_code(signal)),
+        (Some(signal), _) => {
+            stop::tell_if_untold(signal);
+            ExitCode::from(stop::exit_code(signal))
+        }
         (None, Ok(())) => ExitCode::SUCCESS,
         (None, Err(_)) => ExitCode::FAILURE,
     }

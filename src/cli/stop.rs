@@ -24,6 +24,8 @@ struct StopRequest {
     flag: Arc<AtomicBool>,
     /// The first signal received, or [`NO_SIGNAL`].
     signal: Arc<AtomicUsize>,
+    /// True once the user was told what the first signal does ([`tell_stopping`]).
+    told: Arc<AtomicBool>,
 }
 
 static STOP: OnceLock<StopRequest> = OnceLock::new();
@@ -37,6 +39,7 @@ pub fn stop_flag() -> anyhow::Result<Arc<AtomicBool>> {
     let stop = StopRequest {
         flag: Arc::new(AtomicBool::new(false)),
         signal: Arc::new(AtomicUsize::new(NO_SIGNAL)),
+        told: Arc::new(AtomicBool::new(false)),
     };
     for signal in STOP_SIGNALS {
         // In registration order: a signal that finds the flag already set exits at once; the
@@ -49,15 +52,13 @@ pub fn stop_flag() -> anyhow::Result<Arc<AtomicBool>> {
         flag::register_usize(signal, stop.signal.clone(), signal as usize)?;
         flag::register(signal, stop.flag.clone())?;
     }
-    // The handlers above only set flags; this thread tells the user what the first signal does.
+    // The handlers above only set flags; this thread tells the user what the first signal does
+    // (and the job's end does, if the job ends before this thread runs: `tell_if_untold`).
     let mut signals = Signals::new(STOP_SIGNALS)?;
+    let told = stop.told.clone();
     std::thread::spawn(move || {
         if let Some(signal) = signals.forever().next() {
-            eprintln!(
-                "\n{}: stopping inside this substep and finishing the outputs (again to quit \
-                 at once)",
-                signal_name(signal).unwrap_or("signal")
-            );
+            tell_stopping(&told, signal);
         }
     });
     let flag = stop.flag.clone();
@@ -85,6 +86,25 @@ pub fn signal_name(signal: i32) -> Option<&'static str> {
 /// The exit code of a job stopped by `signal`: 130 for SIGINT, 143 for SIGTERM.
 pub fn exit_code(signal: i32) -> u8 {
     (EXIT_CODE_SIGNAL_BASE + signal) as u8
+}
+
+/// At the end of a job stopped by `signal`: tells the user what the signal did, if the
+/// signal's thread has not yet (a job that ends within moments of the signal gets here first).
+pub fn tell_if_untold(signal: i32) {
+    if let Some(stop) = STOP.get() {
+        tell_stopping(&stop.told, signal);
+    }
+}
+
+/// Tells the user, once, that `signal` stops the job and finishes its outputs.
+fn tell_stopping(told: &AtomicBool, signal: i32) {
+    if !told.swap(true, Ordering::SeqCst) {
+        eprintln!(
+            "\n{}: stopping inside this substep and finishing the outputs (again to quit at \
+             once)",
+            signal_name(signal).unwrap_or("signal")
+        );
+    }
 }
 
 /// Gives SIGPIPE its default action back (the Rust runtime ignores it, so printing into a

@@ -298,7 +298,8 @@ impl RobotSim {
     /// The first half of [`Self::single_step`]: sets rapier's step to `dt_s` and the motors'
     /// targets and torque limits for it, moving nothing, so that a terrain's load computed
     /// next meets the motors as that step will solve them. False (and nothing set) for a step
-    /// that is not positive.
+    /// that is not positive. A step begun and never finished (a stop inside the terrain's
+    /// load) leaves the gait advanced and the motors set, the time where it was.
     pub fn begin_step(&mut self, dt_s: f64) -> bool {
         if dt_s.is_nan() || dt_s <= 0.0 {
             return false;

@@ -65,7 +65,8 @@ pub fn validate(scene: &Scene) -> Result<(), SceneError> {
         return Err(scene.invalid(
             "coupling.motor_impedance",
             "true needs coupling.legs_yield_with: articulated (the motor's impedance joins the \
-             inertia the multibody presents at the leg)",
+             inertia the multibody presents at the leg); with leg or robot leave it unset or \
+             set it false",
         ));
     }
     let Some(sand) = scene.sand() else {

@@ -156,7 +156,8 @@ impl Simulation {
                 break;
             }
             match self.terrain.step_robot(robot, dt_s, &mut self.leg_loads) {
-                // Stopped inside the sand's substep: the robot was not stepped.
+                // Stopped inside the sand's substep: the robot was not stepped (its gait and
+                // motors were already set for the step: `RobotSim::begin_step`).
                 Err(RunError::Sim(e)) if e.is_stop() => break,
                 stepped => stepped?,
             }
