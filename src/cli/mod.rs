@@ -48,6 +48,9 @@ enum Command {
     Bag(tools::BagCommand),
     /// Calibrate resistive force theory: press a plate into the scene's MPM sand and fit zeta.
     CalibrateRft(tools::CalibrateRftArgs),
+    /// Drag a vertical blade sideways through the scene's MPM sand (the calibration's bed) and
+    /// print the force against it: a deterministic probe of the sand's resistance.
+    DragBlade(tools::DragBladeArgs),
     /// Measure solver throughput on a 3D sand block collapsing under gravity.
     Bench(tools::BenchArgs),
 }
@@ -72,6 +75,7 @@ pub fn main() -> ExitCode {
         Command::Analyze(args) => tools::analyze(args),
         Command::Bag(command) => tools::bag(command),
         Command::CalibrateRft(args) => tools::calibrate_rft(args),
+        Command::DragBlade(args) => tools::drag_blade(args),
         Command::Bench(args) => tools::bench(args),
     };
     if let Err(e) = &result {

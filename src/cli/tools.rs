@@ -11,6 +11,7 @@ use crate::analysis::bag::{analyze_bag_with, AnalysisOptions};
 use crate::analysis::plots::write_plots;
 use crate::mpm::simd::InstructionSet;
 use crate::scene::Scene;
+use crate::terrain::blade::BladeDrag;
 
 /// Nanoseconds per second, for the bag's log times.
 const NANOS_PER_SECOND: f64 = 1e9;
@@ -78,6 +79,95 @@ pub struct CalibrateRftArgs {
     overrides: Overrides,
     #[command(flatten)]
     json: Json,
+}
+
+/// `sandstep drag-blade`.
+#[derive(clap::Args)]
+pub struct DragBladeArgs {
+    /// Scene file (YAML) with the sand, e.g. config/robot_on_sand.yaml; the bed is its
+    /// terrain.rft.calibration's (grid, side, depth, settling).
+    scene: PathBuf,
+    /// Blade width across the motion (m).
+    #[arg(long, value_name = "M", default_value_t = 0.04)]
+    width: f32,
+    /// Blade height (m).
+    #[arg(long, value_name = "M", default_value_t = 0.03)]
+    height: f32,
+    /// Height of the blade's top above the sand surface (m).
+    #[arg(long, value_name = "M", default_value_t = 0.005)]
+    top_above_surface: f32,
+    /// Drag speed along +x (m/s); 0.3 is about a leg tip's at 2 Hz.
+    #[arg(long, value_name = "M_S", default_value_t = 0.3)]
+    speed: f32,
+    /// Distance dragged (m).
+    #[arg(long, value_name = "M", default_value_t = 0.06)]
+    travel: f32,
+    /// The blade's centre at the start, from the bed's centre along x (m); default: half the
+    /// travel behind it.
+    #[arg(long, value_name = "M", allow_hyphen_values = true)]
+    start_x: Option<f32>,
+    /// The same along y (m).
+    #[arg(
+        long,
+        value_name = "M",
+        allow_hyphen_values = true,
+        default_value_t = 0.0
+    )]
+    start_y: f32,
+    /// Force averaging window (s).
+    #[arg(long, value_name = "S", default_value_t = 0.01)]
+    window: f64,
+    /// Blade thickness (m), below the grid spacing: a CPIC sheet.
+    #[arg(long, value_name = "M", default_value_t = 0.001)]
+    thickness: f32,
+    #[command(flatten)]
+    threads: Threads,
+    #[command(flatten)]
+    overrides: Overrides,
+    #[command(flatten)]
+    json: Json,
+}
+
+/// Drags a blade through the scene's sand and prints the force against it per window.
+pub fn drag_blade(args: DragBladeArgs) -> anyhow::Result<()> {
+    args.threads.apply()?;
+    let scene = Scene::load(&args.scene, &args.overrides.overrides)?;
+    let blade = BladeDrag {
+        width_m: args.width,
+        height_m: args.height,
+        top_above_surface_m: args.top_above_surface,
+        speed_m_s: args.speed,
+        travel_m: args.travel,
+        start_offset_m: [args.start_x.unwrap_or(-0.5 * args.travel), args.start_y],
+        window_s: args.window,
+        thickness_m: args.thickness,
+    };
+    let r = scene.drag_blade(&blade)?;
+    if args.json.json {
+        println!("{}", serde_json::to_string(&r)?);
+        return Ok(());
+    }
+    println!(
+        "{}: blade {:.1} x {:.1} mm dragged {:.1} mm at {:.3} m/s through {} (dx {:.1} mm, {} \
+         particles, {} substeps): {:.4} N over the first half, {:.4} N over the second, {:.1} s \
+         wall",
+        r.scene,
+        blade.width_m * 1e3,
+        blade.height_m * 1e3,
+        blade.travel_m * 1e3,
+        blade.speed_m_s,
+        r.material,
+        r.dx_m * 1e3,
+        r.particles,
+        r.substeps,
+        r.first_half_force_n,
+        r.second_half_force_n,
+        r.wall_time_s
+    );
+    for s in &r.samples {
+        println!("  travel {:6.1} mm: {:.4} N", s.depth_m * 1e3, s.force_n);
+    }
+    Ok(())
 }
 
 /// `sandstep bench`.

@@ -7,6 +7,7 @@ use super::config::{
 };
 use super::{Scene, SceneError};
 use crate::mpm::{SimError, Solver, Wall};
+use crate::terrain::blade::{check, drag_blade, half_means, BladeDrag, BladeDragResult};
 use crate::terrain::calibration::{calibrate, RftCalibration};
 use crate::terrain::TerrainConfig;
 
@@ -17,6 +18,9 @@ pub enum CalibrationError {
     Scene(#[from] SceneError),
     #[error(transparent)]
     Sim(#[from] SimError),
+    /// An option of `sandstep drag-blade` out of range (the message names it).
+    #[error("{0}")]
+    Option(String),
 }
 
 impl Scene {
@@ -110,5 +114,30 @@ impl Scene {
             self.file.display().to_string(),
             material,
         )?)
+    }
+
+    /// `sandstep drag-blade`: `blade` dragged through the plate test's bed of
+    /// `terrain.rft.calibration` (its sand, grid and bed), with the scene's sand-robot friction.
+    pub fn drag_blade(&self, blade: &BladeDrag) -> Result<BladeDragResult, CalibrationError> {
+        let c = &self.config.terrain.rft.calibration;
+        check(blade, c).map_err(CalibrationError::Option)?;
+        let wall = std::time::Instant::now();
+        let (mut bed, material) = self.rft_calibration_bed()?;
+        let (samples, substeps) = drag_blade(&mut bed, c, blade, self.config.coupling.friction)?;
+        let (first_half_force_n, second_half_force_n) = half_means(&samples);
+        Ok(BladeDragResult {
+            scene: self.file.display().to_string(),
+            material,
+            blade: blade.clone(),
+            dx_m: c.dx_m as f64,
+            bed_side_m: c.bed_side_m as f64,
+            bed_depth_m: c.bed_depth_m as f64,
+            particles: bed.particles.len(),
+            substeps,
+            first_half_force_n,
+            second_half_force_n,
+            samples,
+            wall_time_s: wall.elapsed().as_secs_f64(),
+        })
     }
 }

@@ -17,6 +17,7 @@ use std::path::{Path, PathBuf};
 
 use crate::config_error::ConfigError;
 
+pub use calibration_bed::CalibrationError;
 pub use config::SceneConfig;
 pub use error::{ObserverError, RunError};
 pub use run::{

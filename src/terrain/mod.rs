@@ -9,6 +9,7 @@
 //!
 //! Rigid ground, the third model, is rapier's ground plane under the robot (`crate::robot`).
 
+pub mod blade;
 pub mod calibration;
 pub mod config;
 pub mod plate;

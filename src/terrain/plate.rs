@@ -27,12 +27,14 @@ pub struct PlatePress {
     pub friction: f32,
 }
 
-/// The sand's mean upward force on the plate over one window.
+/// The sand's mean force on the plate over one window.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct PlateSample {
-    /// Depth of the plate's mid-plane below the start at the end of the window (m).
+    /// How far the plate's mid-plane has moved at the end of the window (m): pressed, its
+    /// depth below the start.
     pub depth_m: f64,
-    /// Upward force (N): the vertical impulse over the window divided by its length.
+    /// Force against the motion (N): the impulse over the window along the motion's reverse,
+    /// divided by the window's length; pressed, the upward force.
     pub force_n: f64,
 }
 
@@ -40,41 +42,87 @@ pub struct PlateSample {
 /// stepping `sand` with the CPIC coupling (the step also bounded by
 /// [`Coupling::max_dt_s`]), and returns one sample per window.
 pub fn press_plate(sand: &mut Solver, press: &PlatePress) -> Result<Vec<PlateSample>, SimError> {
+    let motion = PlateMotion {
+        start_m: press.start_m,
+        half_extents_m: press.half_extents_m,
+        velocity_m_s: [0.0, 0.0, -press.speed_m_s],
+        duration_s: (press.final_depth_m / press.speed_m_s) as f64,
+        window_s: press.window_s,
+        friction: press.friction,
+    };
+    move_plate(sand, &motion)
+}
+
+/// A thin box (its mid-plane a CPIC sheet, normal to its smallest half extent) moved
+/// kinematically at a constant velocity through sand.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlateMotion {
+    /// Centre at the start (m).
+    pub start_m: [f32; 3],
+    /// Half extents along x, y, z (m); the smallest is the half thickness.
+    pub half_extents_m: [f32; 3],
+    /// Velocity (m/s), not zero.
+    pub velocity_m_s: [f32; 3],
+    /// How long it moves (s).
+    pub duration_s: f64,
+    /// The force is averaged over windows of this much simulated time (s).
+    pub window_s: f64,
+    /// Coulomb friction coefficient sand-plate (-).
+    pub friction: f32,
+}
+
+/// Moves the plate of `motion`, stepping `sand` with the CPIC coupling (one-way: the sand
+/// feels the plate, the plate records what it would feel; the step also bounded by
+/// [`Coupling::max_dt_s`]), and returns one sample per window: the distance travelled
+/// (`depth_m`) and the sand's mean force against the motion (`force_n`, along `-velocity`).
+pub fn move_plate(sand: &mut Solver, motion: &PlateMotion) -> Result<Vec<PlateSample>, SimError> {
     let mut bodies = RigidBodySet::new();
-    let [x, y, z] = press.start_m;
+    let [x, y, z] = motion.start_m;
+    let [vx, vy, vz] = motion.velocity_m_s;
+    let start = Vec3::new(x, y, z);
+    let velocity = Vec3::new(vx, vy, vz);
+    // In f64, so that an axis-aligned motion gives an exact unit axis (the press's samples are
+    // the bits they were).
+    let [ux, uy, uz] = [vx as f64, vy as f64, vz as f64];
+    let speed = (ux * ux + uy * uy + uz * uz).sqrt();
+    let direction = [ux / speed, uy / speed, uz / speed];
     let plate = bodies.insert(
         RigidBodyBuilder::kinematic_velocity_based()
-            .translation(Vec3::new(x, y, z))
-            .linvel(Vec3::new(0.0, 0.0, -press.speed_m_s)),
+            .translation(start)
+            .linvel(velocity),
     );
     let collider = SandCollider {
         name: "plate".into(),
         body: plate,
         body_to_surface: Pose::IDENTITY,
-        surface: CpicSurface::thin_box(press.half_extents_m),
-        friction: press.friction,
+        surface: CpicSurface::thin_box(motion.half_extents_m),
+        friction: motion.friction,
         mode: CouplingMode::OneWay,
     };
     let mut coupling = Coupling::new(vec![collider], &bodies).expect("one collider, in the set");
     let dx = sand.grid().dx;
-    let end_s = sand.time_s + (press.final_depth_m / press.speed_m_s) as f64;
+    let end_s = sand.time_s + motion.duration_s;
     let mut samples = Vec::new();
     let mut window_end = sand.time_s;
     while window_end < end_s {
-        window_end += press.window_s;
+        window_end += motion.window_s;
         let (mut impulse_n_s, mut elapsed_s) = (0.0f64, 0.0f64);
         while sand.time_s < window_end {
             let dt = sand.next_dt().min(coupling.max_dt_s(&bodies, dx));
             let impulses = coupling.substep(sand, &mut bodies, dt)?;
-            impulse_n_s += impulses[0].linear_n_s.z;
+            let j = impulses[0].linear_n_s;
+            impulse_n_s -= j.x * direction[0] + j.y * direction[1] + j.z * direction[2];
             elapsed_s += dt as f64;
             let rb = &mut bodies[plate];
             let moved = rb.translation() + rb.linvel() * dt;
             rb.set_translation(moved, true);
         }
-        let depth_m = z - bodies[plate].translation().z;
+        let moved = bodies[plate].translation() - start;
+        let travelled_m = moved.x as f64 * direction[0]
+            + moved.y as f64 * direction[1]
+            + moved.z as f64 * direction[2];
         samples.push(PlateSample {
-            depth_m: depth_m as f64,
+            depth_m: travelled_m,
             force_n: impulse_n_s / elapsed_s,
         });
     }
