@@ -18,7 +18,7 @@ fn scene() -> Scene {
         "terrain.rft.calibration.bed_side_m=0.16",
         "terrain.rft.calibration.bed_depth_m=0.07",
         // Headroom above the bed (one plate side): room for the raised blade.
-        "terrain.rft.calibration.plate_side_m=0.04",
+        "terrain.rft.calibration.plate_side_m=0.05",
     ]
     .map(String::from)
     .to_vec();
@@ -51,7 +51,7 @@ fn drag(b: &BladeDrag) -> BladeDragResult {
 fn a_blade_in_the_sand_is_resisted_and_one_above_it_is_not() {
     // Buried 2 cm, 4 cm of travel (about 10 s).
     let buried = drag(&blade(0.01, 0.04));
-    // A 1 cm blade with its bottom two cells above the settled surface, beyond the kernel's
+    // A 1 cm blade with its bottom two cells above the bed's top, beyond the kernel's
     // reach. (Half a cell above, it felt 4 % of the buried blade's force: CPIC cuts the
     // stencils of the surface particles whose nodes reach past the sheet.)
     let clear = drag(&BladeDrag {
@@ -59,8 +59,9 @@ fn a_blade_in_the_sand_is_resisted_and_one_above_it_is_not() {
         ..blade(0.03, 0.04)
     });
     // Passive earth pressure alone (Rankine, 45 deg: 0.5 rho g H^2 Kp w) is about 0.9 N on this
-    // blade; the MPM sand resists it some forty times more (measured: 41 N over the first half;
-    // docs/speed-vs-accuracy.md). Bounds well apart from both.
+    // blade; the MPM sand resists it some forty times more (measured here: 41 N over the first
+    // half; docs/speed-vs-accuracy.md, "The resistance is far above passive earth pressure").
+    // Bounds well apart from both.
     assert!(
         buried.first_half_force_n > 5.0 && buried.first_half_force_n < 200.0,
         "buried blade, first half: {} N",
@@ -73,6 +74,7 @@ fn a_blade_in_the_sand_is_resisted_and_one_above_it_is_not() {
         buried.first_half_force_n,
         buried.second_half_force_n
     );
+    assert!(!clear.samples.is_empty());
     for s in &clear.samples {
         assert!(
             s.force_n.abs() < 1e-3 * buried.first_half_force_n,
@@ -83,7 +85,10 @@ fn a_blade_in_the_sand_is_resisted_and_one_above_it_is_not() {
     }
     // Deterministic: the same blade again gives the same bits.
     let again = drag(&blade(0.01, 0.04));
-    assert_eq!(again.samples, buried.samples);
+    let bits = |r: &BladeDragResult| -> Vec<u64> {
+        r.samples.iter().map(|s| s.force_n.to_bits()).collect()
+    };
+    assert_eq!(bits(&again), bits(&buried));
 }
 
 /// `b` is refused before anything runs, the message naming `option`.
@@ -111,4 +116,19 @@ fn a_blade_that_would_leave_the_bed_is_refused_by_name() {
         ..blade(0.01, 0.06)
     };
     assert_refused(&tall, "--height");
+    let thick = BladeDrag {
+        thickness_m: 0.02,
+        ..blade(0.01, 0.06)
+    };
+    assert_refused(&thick, "--thickness");
+    let nowhere = BladeDrag {
+        start_offset_m: [f32::NAN, 0.0],
+        ..blade(0.01, 0.06)
+    };
+    assert_refused(&nowhere, "--start-x");
+    let one_window = BladeDrag {
+        window_s: 0.5,
+        ..blade(0.01, 0.06)
+    };
+    assert_refused(&one_window, "--window");
 }
