@@ -95,7 +95,8 @@ pub fn check(blade: &BladeDrag, c: &RftCalibrationConfig) -> Result<(), String> 
     }
     if blade.thickness_m >= c.dx_m || blade.thickness_m >= blade.width_m.min(blade.height_m) {
         return Err(format!(
-            "--thickness = {} m must be below the grid spacing ({} m) and the blade's width and              height: a CPIC sheet",
+            "--thickness = {} m must be below the grid spacing ({} m) and the blade's width and \
+             height: a CPIC sheet",
             blade.thickness_m, c.dx_m
         ));
     }
@@ -105,7 +106,8 @@ pub fn check(blade: &BladeDrag, c: &RftCalibrationConfig) -> Result<(), String> 
         && blade.window_s >= duration_s / MAX_WINDOWS)
     {
         return Err(format!(
-            "--window = {} s must lie between {:.3e} s ({MAX_WINDOWS} windows) and half the              drag's {duration_s} s (--travel / --speed), for two halves to average",
+            "--window = {} s must lie between {:.3e} s ({MAX_WINDOWS} windows) and half the \
+             drag's {duration_s:.4} s (--travel / --speed), for two halves to average",
             blade.window_s,
             duration_s / MAX_WINDOWS
         ));
