@@ -90,6 +90,38 @@ fn the_relaxation_time_scales_the_viscosity_with_the_stiffness() {
     assert!((soft - 50.0 / 3.0).abs() < 0.01, "{soft} Pa s");
 }
 
+/// `yield_cone` reaches the solver's cone slope (`docs/physics.md`, "The yield cone's fit"): the
+/// shipped sand's triaxial fit at 45 deg, 0.5036; the plane-strain fit, sqrt(2) sin(45 deg) / 3
+/// = 1/3; an unknown fit is refused by name.
+#[test]
+fn the_yield_cone_option_sets_the_cone() {
+    use sandstep::mpm::material::Constitutive;
+    let alpha = |overrides: &[&str]| {
+        let mut all = vec!["sand.bodies.0.box={min_m: [0, 0, -0.02], max_m: [0.02, 0.02, 0]}"];
+        all.extend_from_slice(overrides);
+        let all: Vec<String> = all.iter().map(|s| s.to_string()).collect();
+        let scene = Scene::load(Path::new("config/robot_on_sand.yaml"), &all).unwrap();
+        match &scene.build_solver().unwrap().materials[0].model {
+            Constitutive::DruckerPrager(dp) => dp.alpha,
+            other => panic!("sand is Drucker-Prager, not {other:?}"),
+        }
+    };
+    let triaxial = alpha(&[]);
+    assert!((triaxial - 0.5036).abs() < 1e-4, "{triaxial}");
+    let plane_strain = alpha(&["sand.materials.sand.yield_cone=plane_strain"]);
+    assert!((plane_strain - 1.0 / 3.0).abs() < 1e-5, "{plane_strain}");
+    let e = error_of(SCENE, &["sand.materials.sand.yield_cone=round"]);
+    assert_names(
+        &e,
+        &[
+            "scenes/test.yaml",
+            "sand.materials.sand",
+            "round",
+            "plane_strain",
+        ],
+    );
+}
+
 #[test]
 fn out_of_range_values() {
     for (set, field) in [

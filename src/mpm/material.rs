@@ -53,8 +53,8 @@ impl Lame {
 pub struct DruckerPrager {
     /// Elastic moduli (Pa).
     pub lame: Lame,
-    /// cone slope alpha = sqrt(2/3) * 2 sin(phi) / (3 - sin(phi)) (dimensionless), phi the
-    /// friction angle.
+    /// cone slope alpha (dimensionless), from the friction angle phi and the cone's fit
+    /// ([`YieldCone::alpha`]).
     pub alpha: f32,
     /// Remember the volume removed by projections to the cone tip and give it back on later
     /// compression, so sand does not gain volume every time it is pulled apart.
@@ -67,13 +67,61 @@ pub struct DruckerPrager {
     pub elastic_viscosity_pa_s: f32,
 }
 
-impl DruckerPrager {
-    /// `friction_angle_rad`: internal friction angle phi (rad), typically 30-40 deg for sand.
-    pub fn new(lame: Lame, friction_angle_rad: f32, volume_correction: bool) -> Self {
+/// Where the Drucker-Prager cone meets Mohr-Coulomb's pyramid of the same friction angle phi
+/// (docs/physics.md, "The yield cone's fit"). A round cone cannot match the six-sided pyramid in
+/// every state of stress; the fit says in which it gives Mohr-Coulomb's strength.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum YieldCone {
+    /// Through the pyramid's compression corners (Klar et al. 2016, the MLS-MPM paper):
+    /// `alpha = sqrt(2/3) 2 sin(phi) / (3 - sin(phi))`. Right in triaxial compression; in plane
+    /// strain it is stronger than Mohr-Coulomb, and from phi = 42.2 deg on it admits, at any
+    /// magnitude, the stress of sand pushed sideways against a free surface (one principal
+    /// stress zero, the intermediate one the mean of the others), where Mohr-Coulomb has no
+    /// strength at all.
+    #[default]
+    TriaxialCompression,
+    /// Mohr-Coulomb's strength in plane strain with this model's plastic flow (deviatoric, no
+    /// plastic volume change, so the intermediate stress is the mean of the other two):
+    /// `alpha = sqrt(2) sin(phi) / 3`. Bodies ploughing sand near its surface meet a resistance
+    /// bounded by the friction angle, not by the sand's elastic stiffness.
+    PlaneStrain,
+}
+
+impl YieldCone {
+    /// The cone slope alpha (dimensionless) for a friction angle (rad): the cone is
+    /// `|dev tau| + alpha tr(tau) <= 0` in Kirchhoff stress tau.
+    pub fn alpha(self, friction_angle_rad: f32) -> f32 {
         let sin_phi = libm::sinf(friction_angle_rad);
+        match self {
+            Self::TriaxialCompression => (2.0f32 / 3.0).sqrt() * 2.0 * sin_phi / (3.0 - sin_phi),
+            Self::PlaneStrain => 2.0f32.sqrt() * sin_phi / 3.0,
+        }
+    }
+}
+
+impl DruckerPrager {
+    /// `friction_angle_rad`: internal friction angle phi (rad), typically 30-40 deg for sand;
+    /// the cone fitted in triaxial compression (Klar et al. 2016).
+    pub fn new(lame: Lame, friction_angle_rad: f32, volume_correction: bool) -> Self {
+        Self::with_cone(
+            lame,
+            friction_angle_rad,
+            YieldCone::TriaxialCompression,
+            volume_correction,
+        )
+    }
+
+    /// As [`DruckerPrager::new`], with the cone fitted as `cone` says.
+    pub fn with_cone(
+        lame: Lame,
+        friction_angle_rad: f32,
+        cone: YieldCone,
+        volume_correction: bool,
+    ) -> Self {
         Self {
             lame,
-            alpha: (2.0f32 / 3.0).sqrt() * 2.0 * sin_phi / (3.0 - sin_phi),
+            alpha: cone.alpha(friction_angle_rad),
             volume_correction,
             elastic_viscosity_pa_s: 0.0,
         }
@@ -500,6 +548,57 @@ mod tests {
     fn stress_cone_value(tau: &Matrix3<f32>, alpha: f32) -> f32 {
         let mean = tau.trace() / 3.0;
         (tau - Matrix3::identity() * mean).norm() + alpha * tau.trace()
+    }
+
+    /// Mohr-Coulomb in plane strain with deviatoric flow: principal stresses (compression
+    /// negative) `s1 <= s2 = (s1 + s3)/2 <= s3` at the limit `(s3 - s1) = -(s1 + s3) sin(phi)`.
+    fn plane_strain_limit(phi: f32, mean_pa: f32) -> Matrix3<f32> {
+        let radius = mean_pa * libm::sinf(phi);
+        Matrix3::from_diagonal(&Vector3::new(
+            -mean_pa - radius,
+            -mean_pa,
+            -mean_pa + radius,
+        ))
+    }
+
+    #[test]
+    fn plane_strain_cone_holds_mohr_coulomb_plane_strain_limit() {
+        for phi_deg in [20.0f32, 30.0, 35.0, 45.0] {
+            let phi = phi_deg.to_radians();
+            let alpha = YieldCone::PlaneStrain.alpha(phi);
+            let on_limit = plane_strain_limit(phi, 1000.0);
+            // On the cone (to rounding), and 1 % more shear is outside it.
+            assert!(
+                stress_cone_value(&on_limit, alpha).abs() < 1e-3,
+                "{phi_deg} deg"
+            );
+            let beyond = plane_strain_limit(phi, 1000.0)
+                + Matrix3::from_diagonal(&Vector3::new(-1.0, 0.0, 1.0)) * (10.0 * libm::sinf(phi));
+            assert!(stress_cone_value(&beyond, alpha) > 0.0, "{phi_deg} deg");
+            // The triaxial-compression cone is the wider one in plane strain.
+            assert!(
+                YieldCone::TriaxialCompression.alpha(phi) > alpha,
+                "{phi_deg} deg"
+            );
+        }
+    }
+
+    /// Sand pushed sideways against a free surface: principal stresses `(-s, -s/2, 0)`. Mohr-
+    /// Coulomb gives it no strength; the triaxial-compression cone holds it at 45 deg (at any
+    /// magnitude `s`), from 42.2 deg on; the plane-strain cone never.
+    #[test]
+    fn triaxial_cone_holds_a_free_surface_pushed_sideways_from_42_deg() {
+        let pushed = Matrix3::from_diagonal(&Vector3::new(-1000.0, -500.0, 0.0));
+        let holds = |cone: YieldCone, deg: f32| {
+            stress_cone_value(&pushed, cone.alpha(deg.to_radians())) <= 0.0
+        };
+        assert!(holds(YieldCone::TriaxialCompression, 45.0));
+        assert!(holds(YieldCone::TriaxialCompression, 42.3));
+        assert!(!holds(YieldCone::TriaxialCompression, 42.1));
+        assert!(!holds(YieldCone::TriaxialCompression, 35.0));
+        for deg in [30.0, 45.0, 60.0, 80.0] {
+            assert!(!holds(YieldCone::PlaneStrain, deg), "{deg} deg");
+        }
     }
 
     #[test]

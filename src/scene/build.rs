@@ -458,6 +458,7 @@ fn constitutive(m: &MaterialConfig) -> Constitutive {
             youngs_modulus_pa,
             poisson_ratio,
             friction_angle_deg,
+            yield_cone,
             volume_correction,
             elastic_viscosity_pa_s,
             elastic_relaxation_s,
@@ -469,7 +470,12 @@ fn constitutive(m: &MaterialConfig) -> Constitutive {
                     Some(tau_s) => lame.mu * tau_s,
                     None => elastic_viscosity_pa_s.unwrap_or(0.0),
                 },
-                ..DruckerPrager::new(lame, friction_angle_deg.to_radians(), volume_correction)
+                ..DruckerPrager::with_cone(
+                    lame,
+                    friction_angle_deg.to_radians(),
+                    yield_cone,
+                    volume_correction,
+                )
             })
         }
         MaterialConfig::FixedCorotated {

@@ -6,6 +6,7 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Deserializer};
 
 use crate::mpm::kernel::Kernel;
+use crate::mpm::material::YieldCone;
 use crate::mpm::{CpicBand, Transfer, Wall};
 use crate::mpm::{DEFAULT_CPIC_BAND_RELAXATION_S, DEFAULT_FLIP_RELAXATION_S};
 
@@ -287,6 +288,12 @@ pub enum MaterialConfig {
         poisson_ratio: f32,
         /// Internal friction angle (deg), in (0, 90).
         friction_angle_deg: f32,
+        /// Where the cone meets Mohr-Coulomb's strength: `triaxial_compression` (Klar et al.
+        /// 2016, the MLS-MPM paper; the default) or `plane_strain` (bodies ploughing the sand
+        /// near its surface meet a resistance bounded by the friction angle). docs/physics.md,
+        /// "The yield cone's fit".
+        #[serde(default)]
+        yield_cone: YieldCone,
         /// Give back volume gained by expansion on later compression. Default true.
         #[serde(default = "yes")]
         volume_correction: bool,
