@@ -47,7 +47,12 @@ fn blade(top_above_surface_m: f32, travel_m: f32) -> BladeDrag {
 }
 
 fn drag(b: &BladeDrag) -> BladeDragResult {
-    let r = scene().drag_blade(b).unwrap();
+    drag_in(scene(), b)
+}
+
+/// Drags `b` through `scene`'s bed and prints the two halves' forces.
+fn drag_in(scene: Scene, b: &BladeDrag) -> BladeDragResult {
+    let r = scene.drag_blade(b).unwrap();
     println!(
         "top {:+.3} m: {:.4} N, {:.4} N ({} substeps)",
         b.top_above_surface_m, r.first_half_force_n, r.second_half_force_n, r.substeps
@@ -104,13 +109,8 @@ fn a_blade_in_the_sand_is_resisted_and_one_above_it_is_not() {
 fn drag_at(dt_s: &str, more: &[&str]) -> (f64, f64) {
     let step = format!("sand.solver.max_dt_s={dt_s}");
     let overrides: Vec<&str> = more.iter().copied().chain([step.as_str()]).collect();
-    let r = scene_with(&overrides)
-        .drag_blade(&blade(0.01, 0.06))
-        .unwrap();
-    println!(
-        "{more:?} at {dt_s} s: {:.4} N, {:.4} N ({} substeps)",
-        r.first_half_force_n, r.second_half_force_n, r.substeps
-    );
+    println!("{more:?} at {dt_s} s:");
+    let r = drag_in(scene_with(&overrides), &blade(0.01, 0.06));
     (r.first_half_force_n, r.second_half_force_n)
 }
 
