@@ -396,3 +396,43 @@ fn the_motors_impedance_is_the_articulated_legs_default() {
     assert!(!coupling(&["coupling.motor_impedance=false"]).motor_impedance());
     assert!(coupling(&["coupling.motor_impedance=null"]).motor_impedance());
 }
+
+/// Every lattice `particles_per_cell` allows fills a body with its mass (density times volume)
+/// about its centre, at the count asked for; others are refused with the allowed ones named.
+#[test]
+fn every_particle_lattice_gives_the_body_its_mass() {
+    let sand_box = "sand.bodies.0.box={min_m: [0, 0, -0.02], max_m: [0.02, 0.03, 0]}";
+    let cells = 2 * 3 * 2;
+    let density_kg_m3 = 2000.0;
+    let expected_mass_kg = density_kg_m3 * 0.02 * 0.03 * 0.02;
+    for per_cell in [1_usize, 2, 4, 8, 16, 27, 32, 64] {
+        let overrides = [
+            sand_box.to_string(),
+            format!("sand.bodies.0.particles_per_cell={per_cell}"),
+            format!("sand.materials.sand.density_kg_m3={density_kg_m3}"),
+        ];
+        let scene = Scene::load(Path::new("config/robot_on_sand.yaml"), &overrides).unwrap();
+        let particles = scene.build_solver().unwrap().particles;
+        assert_eq!(particles.len(), cells * per_cell, "{per_cell} per cell");
+        let mass: f64 = particles.mass.iter().map(|&m| m as f64).sum();
+        assert!(
+            (mass / expected_mass_kg - 1.0).abs() < 1e-5,
+            "{per_cell} per cell: {mass} kg against {expected_mass_kg}"
+        );
+        let centroid =
+            particles.position.iter().sum::<nalgebra::Vector3<f32>>() / particles.len() as f32;
+        let centre = nalgebra::Vector3::new(0.01, 0.015, -0.01);
+        assert!(
+            (centroid - centre).norm() < 1e-6,
+            "{per_cell} per cell: {centroid:?}"
+        );
+    }
+    let e = error_of(
+        include_str!("../config/robot_on_sand.yaml"),
+        &["sand.bodies.0.particles_per_cell=6"],
+    );
+    assert_names(
+        &e,
+        &["sand.bodies[0].particles_per_cell", "face-centred", "4"],
+    );
+}

@@ -43,7 +43,8 @@ const WINDOW_STEPS_PER_CELL: usize = 8;
 
 /// Measures the deposit formed by `positions`.
 pub fn measure(g: &CollapseGeometry, positions: &[Vector3<f32>]) -> Deposit {
-    let per_edge = libm::cbrtf(g.particles_per_cell as f32).round();
+    // Particles along a cell's edge: 2 at 8 per cell, 1.59 at 4 (a mean, off the cubic lattice).
+    let per_edge = libm::cbrtf(g.particles_per_cell as f32);
     let half_spacing = 0.5 * g.dx / per_edge;
     let step = g.dx / WINDOW_STEPS_PER_CELL as f32;
     let sub_bin = |x: &Vector3<f32>| ((x.x - g.wall_x) / step).max(0.0) as usize;
@@ -87,6 +88,16 @@ pub fn lube_normalized_runout(aspect_ratio: f32) -> Option<f32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The mean particles per edge is exact for the cubic lattices, so their deposits are
+    /// measured as they were when it was rounded.
+    #[test]
+    fn cube_numbers_have_whole_particles_per_edge() {
+        for n in [1_u32, 8, 27, 64] {
+            let edge = libm::cbrtf(n as f32);
+            assert_eq!(edge, edge.round(), "{n} per cell");
+        }
+    }
 
     /// A channel 1 cm wide on a 5 mm grid, 8 particles per cell.
     fn test_channel() -> CollapseGeometry {

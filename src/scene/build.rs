@@ -5,6 +5,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use nalgebra::Vector3;
 
 use super::config::{BodyConfig, BoxShape, MaterialConfig, SandConfig};
+use super::lattice::Lattice;
 use super::{Scene, SceneError};
 use crate::mpm::material::{Constitutive, DruckerPrager, FixedCorotated, Lame};
 use crate::mpm::{
@@ -248,12 +249,13 @@ fn validate_body(
             ),
         ));
     }
-    if lattice_side(body.particles_per_cell).is_none() {
+    if Lattice::of(body.particles_per_cell).is_none() {
         return Err(scene.invalid(
             field("particles_per_cell"),
             format!(
-                "{} must be a cube number: 1, 8, 27 or 64",
-                body.particles_per_cell
+                "{} must be one of {}",
+                body.particles_per_cell,
+                Lattice::ALLOWED
             ),
         ));
     }
@@ -295,11 +297,6 @@ fn validate_body(
         }
     }
     Ok(())
-}
-
-/// Particles per cell edge for a cube number of particles per cell.
-fn lattice_side(particles_per_cell: u32) -> Option<u32> {
-    (1..=4).find(|n| n * n * n == particles_per_cell)
 }
 
 impl Scene {
@@ -494,13 +491,9 @@ type Inside = Box<dyn Fn(&Vector3<f32>) -> bool>;
 /// Particles a body's lattice holds at most (its bounding box's lattice points; f64, so that a
 /// mistyped `dx` gives a huge count, not an overflow): for the memory estimate before filling.
 pub fn body_particle_bound(body: &BodyConfig, dx: f32) -> f64 {
-    let side = lattice_side(body.particles_per_cell).expect("validated") as f64;
-    let spacing = dx as f64 / side;
+    let lattice = Lattice::of(body.particles_per_cell).expect("validated");
     let (lo, hi, _) = body_bounds(body);
-    (hi - lo)
-        .iter()
-        .map(|&e| (e as f64 / spacing).round().max(1.0))
-        .product()
+    lattice.count_in(&(hi - lo), dx)
 }
 
 /// A body's bounding box (m) and the test of whether a point is inside it.
@@ -530,10 +523,10 @@ fn body_bounds(body: &BodyConfig) -> (Vector3<f32>, Vector3<f32>, Inside) {
     }
 }
 
-/// Particles on a regular lattice of `n^3` per cell (aligned with the grid), inside the body;
-/// or [`FillStopped`] once `stop` is set: it is looked at before every lattice plane, so a
-/// stop waits for one plane of particles (the default bed at dx = 2.5 mm, 6.8 M particles,
-/// fills in 0.3 s).
+/// Particles on the body's lattice ([`Lattice`], aligned with the grid), inside the body; or
+/// [`FillStopped`] once `stop` is set: it is looked at before every lattice plane, so a stop
+/// waits for one plane of particles (the default bed at dx = 2.5 mm, 6.8 M particles, fills in
+/// 0.3 s).
 pub fn fill_body(
     body: &BodyConfig,
     dx: f32,
@@ -541,33 +534,33 @@ pub fn fill_body(
     material: u16,
     stop: &AtomicBool,
 ) -> Result<Vec<NewParticle>, FillStopped> {
-    let side = lattice_side(body.particles_per_cell).expect("validated") as f32;
-    let spacing = dx / side;
-    let volume = spacing * spacing * spacing;
+    let lattice = Lattice::of(body.particles_per_cell).expect("validated");
+    let volume = lattice.particle_volume(dx);
     let (lo, hi, inside) = body_bounds(body);
-    // Lattice points at (i + 1/2) spacing from the box corner.
-    let counts = (hi - lo).map(|e| (e / spacing).round().max(1.0) as usize);
-    let mut out = Vec::with_capacity(counts.x * counts.y * counts.z);
-    for i in 0..counts.x {
-        if stop.load(Ordering::Relaxed) {
-            return Err(FillStopped);
-        }
-        for j in 0..counts.y {
-            for k in 0..counts.z {
-                let x = lo + Vector3::new(i as f32 + 0.5, j as f32 + 0.5, k as f32 + 0.5) * spacing;
-                if inside(&x) {
-                    out.push(NewParticle {
-                        position: x,
-                        velocity: body.velocity_m_s.into(),
-                        mass: density * volume,
-                        volume,
-                        material,
-                    });
-                }
+    let extent = hi - lo;
+    let mut out = Vec::with_capacity(lattice.count_in(&extent, dx) as usize);
+    let filled = lattice.points(
+        &lo,
+        &extent,
+        dx,
+        || !stop.load(Ordering::Relaxed),
+        |x| {
+            if inside(&x) {
+                out.push(NewParticle {
+                    position: x,
+                    velocity: body.velocity_m_s.into(),
+                    mass: density * volume,
+                    volume,
+                    material,
+                });
             }
-        }
+        },
+    );
+    if filled {
+        Ok(out)
+    } else {
+        Err(FillStopped)
     }
-    Ok(out)
 }
 
 /// Checks the `node` section.

@@ -342,7 +342,8 @@ pub struct BodyConfig {
     pub box_shape: Option<BoxShape>,
     /// A cylinder.
     pub cylinder: Option<CylinderShape>,
-    /// Particles per grid cell: a cube number (1, 8, 27, 64), placed on a regular lattice.
+    /// Particles per grid cell, on a lattice aligned with the grid ([`super::lattice::Lattice`]):
+    /// 1, 8, 27 or 64 (simple cubic), 2 or 16 (body-centred), 4 or 32 (face-centred).
     /// Default 8.
     #[serde(default = "default_ppc")]
     pub particles_per_cell: u32,
@@ -407,7 +408,7 @@ pub struct ColumnCollapseConfig {
     pub initial_length_m: f32,
     /// Aspect ratio a = H_i / L_i (dimensionless), > 0.
     pub aspect_ratio: f32,
-    /// Particles per cell (cube number). Default 8.
+    /// Particles per cell, as for bodies. Default 8.
     #[serde(default = "default_ppc")]
     pub particles_per_cell: u32,
 }

@@ -5,6 +5,7 @@ pub mod build;
 pub mod calibration_bed;
 pub mod config;
 pub mod error;
+pub mod lattice;
 pub mod memory;
 pub(crate) mod overrides;
 pub mod ply;
