@@ -135,7 +135,16 @@ impl Simulation {
     /// Advances to `target_s` seconds of simulated time (no-op if already there), or less if
     /// a stop is requested ([`Simulation::new_unless`]). A stop inside the sand's G2P leaves
     /// part of the sand one substep ahead of [`Simulation::time_s`] ([`Solver::stop_on`]).
+    ///
+    /// Runs on a worker of rayon's pool, so the substeps' parallel stages split their work
+    /// there instead of each waking the pool from the calling thread and putting that thread
+    /// to sleep until it is done (`docs/performance.md`, "The substeps on a worker thread").
     pub fn advance_to(&mut self, target_s: f64) -> Result<(), RunError> {
+        rayon::scope(|_| self.advance_on_worker(target_s))
+    }
+
+    /// [`Simulation::advance_to`], on the thread it is called on.
+    fn advance_on_worker(&mut self, target_s: f64) -> Result<(), RunError> {
         let Some(robot) = self.robot.as_deref_mut() else {
             let Terrain::Sand(sand) = &mut self.terrain else {
                 return Ok(());
