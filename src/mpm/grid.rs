@@ -11,6 +11,9 @@ use nalgebra::Vector3;
 
 /// Nodes per block edge.
 pub const BLOCK_EDGE: i32 = 4;
+/// `BLOCK_EDGE = 2^BLOCK_EDGE_SHIFT`: block coordinates are node indices shifted right.
+const BLOCK_EDGE_SHIFT: u32 = BLOCK_EDGE.trailing_zeros();
+const _: () = assert!(BLOCK_EDGE == 1 << BLOCK_EDGE_SHIFT);
 /// Nodes per block.
 pub const BLOCK_NODES: usize = (BLOCK_EDGE * BLOCK_EDGE * BLOCK_EDGE) as usize;
 /// Nodes per arena edge: a block plus the two extra nodes a quadratic stencil reaches.
@@ -150,14 +153,13 @@ impl SparseGrid {
     #[inline]
     pub fn block_key(&self, x: &Vector3<f32>) -> u32 {
         let xg = self.to_grid(x);
-        let mut key = 0i64;
-        for axis in 0..3 {
+        let BlockLattice { min, dims } = self.lattice;
+        // Lattice coordinate along `axis`; the floor division by BLOCK_EDGE is a shift.
+        let block = |axis: usize| {
             let base = super::kernel::floor_i32(xg[axis] - 0.5);
-            let b = (base.div_euclid(BLOCK_EDGE) - self.lattice.min[axis])
-                .clamp(0, self.lattice.dims[axis] - 1);
-            key = key * self.lattice.dims[axis] as i64 + b as i64;
-        }
-        key as u32
+            ((base >> BLOCK_EDGE_SHIFT) - min[axis]).clamp(0, dims[axis] - 1) as u32
+        };
+        (block(0) * dims[1] as u32 + block(1)) * dims[2] as u32 + block(2)
     }
 
     /// The block lattice the table covers (keys and coordinates).
