@@ -16,6 +16,8 @@
 use nalgebra::Vector3;
 use serde::Serialize;
 
+use crate::mpm::lattice::Lattice;
+
 /// Where the column stands and how it is sampled.
 #[derive(Clone, Copy, Debug)]
 pub struct CollapseGeometry {
@@ -27,8 +29,8 @@ pub struct CollapseGeometry {
     pub width: f32,
     /// Grid spacing (m): the bin width.
     pub dx: f32,
-    /// Particles per cell.
-    pub particles_per_cell: u32,
+    /// The lattice the column was filled on.
+    pub lattice: Lattice,
 }
 
 /// Length and height of a deposit (m).
@@ -43,9 +45,9 @@ const WINDOW_STEPS_PER_CELL: usize = 8;
 
 /// Measures the deposit formed by `positions`.
 pub fn measure(g: &CollapseGeometry, positions: &[Vector3<f32>]) -> Deposit {
-    // Particles along a cell's edge: 2 at 8 per cell, 1.59 at 4 (a mean, off the cubic lattice).
-    let per_edge = libm::cbrtf(g.particles_per_cell as f32);
-    let half_spacing = 0.5 * g.dx / per_edge;
+    let per_edge = g.lattice.mean_per_edge();
+    // From the outermost particle to the face of the sand it stands for.
+    let margin = g.lattice.face_margin(g.dx);
     let step = g.dx / WINDOW_STEPS_PER_CELL as f32;
     let sub_bin = |x: &Vector3<f32>| ((x.x - g.wall_x) / step).max(0.0) as usize;
     let last = positions.iter().map(sub_bin).max();
@@ -68,8 +70,8 @@ pub fn measure(g: &CollapseGeometry, positions: &[Vector3<f32>]) -> Deposit {
         top = top.max(x.z);
     }
     Deposit {
-        length_m: front + half_spacing - g.wall_x,
-        height_m: top + half_spacing - g.floor_z,
+        length_m: front + margin - g.wall_x,
+        height_m: top + margin - g.floor_z,
     }
 }
 
@@ -89,16 +91,6 @@ pub fn lube_normalized_runout(aspect_ratio: f32) -> Option<f32> {
 mod tests {
     use super::*;
 
-    /// The mean particles per edge is exact for the cubic lattices, so their deposits are
-    /// measured as they were when it was rounded.
-    #[test]
-    fn cube_numbers_have_whole_particles_per_edge() {
-        for n in [1_u32, 8, 27, 64] {
-            let edge = libm::cbrtf(n as f32);
-            assert_eq!(edge, edge.round(), "{n} per cell");
-        }
-    }
-
     /// A channel 1 cm wide on a 5 mm grid, 8 particles per cell.
     fn test_channel() -> CollapseGeometry {
         CollapseGeometry {
@@ -106,7 +98,7 @@ mod tests {
             floor_z: 0.0,
             width: 0.01,
             dx: 0.005,
-            particles_per_cell: 8,
+            lattice: Lattice::of(8).unwrap(),
         }
     }
 
@@ -131,6 +123,27 @@ mod tests {
         let d = measure(&g, &pts);
         assert!((d.length_m - 0.05).abs() < 1e-5, "{d:?}");
         assert!((d.height_m - 0.1).abs() < 1e-5, "{d:?}");
+    }
+
+    /// A box filled on any lattice of more than one particle per cell measures as its box: the
+    /// margin from the outermost particles to the box's faces is the lattice's own. (At one per
+    /// cell the untouched columns stand exactly one window apart, and rounding can leave a
+    /// window empty: the measure is for deposits, whose particles have moved.)
+    #[test]
+    fn a_box_on_every_lattice_measures_as_its_box() {
+        for n in [2, 4, 8, 16, 27, 32, 64] {
+            let g = CollapseGeometry {
+                lattice: Lattice::of(n).unwrap(),
+                ..test_channel()
+            };
+            let mut pts = Vec::new();
+            let extent = Vector3::new(0.05, g.width, 0.1);
+            g.lattice
+                .points(&Vector3::zeros(), &extent, g.dx, || true, |x| pts.push(x));
+            let d = measure(&g, &pts);
+            assert!((d.length_m - 0.05).abs() < 1e-5, "{n} per cell: {d:?}");
+            assert!((d.height_m - 0.1).abs() < 1e-5, "{n} per cell: {d:?}");
+        }
     }
 
     /// A deposit thinning linearly from 2 cells at the wall to nothing 10 cells out, sampled

@@ -8,6 +8,7 @@ pub mod boundary;
 pub mod cpic;
 pub mod grid;
 pub mod kernel;
+pub mod lattice;
 pub mod material;
 pub mod memory;
 pub mod particles;

@@ -5,8 +5,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use nalgebra::Vector3;
 
 use super::config::{BodyConfig, BoxShape, MaterialConfig, SandConfig};
-use super::lattice::Lattice;
 use super::{Scene, SceneError};
+use crate::mpm::lattice::Lattice;
 use crate::mpm::material::{Constitutive, DruckerPrager, FixedCorotated, Lame};
 use crate::mpm::{
     NewParticle, SleepSettings, Solver, SolverMaterial, SolverSettings, TimeStep, Walls,

@@ -342,7 +342,8 @@ pub struct BodyConfig {
     pub box_shape: Option<BoxShape>,
     /// A cylinder.
     pub cylinder: Option<CylinderShape>,
-    /// Particles per grid cell, on a lattice aligned with the grid ([`super::lattice::Lattice`]):
+    /// Particles per grid cell, on a lattice from the body's min corner
+    /// ([`crate::mpm::lattice::Lattice`]):
     /// 1, 8, 27 or 64 (simple cubic), 2 or 16 (body-centred), 4 or 32 (face-centred).
     /// Default 8.
     #[serde(default = "default_ppc")]

@@ -5,7 +5,6 @@ pub mod build;
 pub mod calibration_bed;
 pub mod config;
 pub mod error;
-pub mod lattice;
 pub mod memory;
 pub(crate) mod overrides;
 pub mod ply;

@@ -12,6 +12,7 @@ use super::error::{ObserverError, RunError};
 use super::simulation::Simulation;
 use super::Scene;
 use crate::analysis::collapse::{self, CollapseGeometry};
+use crate::mpm::lattice::Lattice;
 use crate::progress::Progress;
 use crate::robot::RobotSim;
 
@@ -241,7 +242,7 @@ pub fn collapse_geometry(scene: &Scene) -> Option<CollapseGeometry> {
         floor_z: sand.domain.min_m[2],
         width: sand.domain.max_m[1] - sand.domain.min_m[1],
         dx: sand.dx_m,
-        particles_per_cell: cc.particles_per_cell,
+        lattice: Lattice::of(cc.particles_per_cell).expect("validated"),
     })
 }
 

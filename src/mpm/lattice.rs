@@ -1,11 +1,13 @@
-//! Where a body's particles start: a lattice aligned with the grid, `particles_per_cell` to a
-//! cell.
+//! Where a body's particles start: a lattice of cubic units from the body's min corner (on the
+//! grid when that corner is), `particles_per_cell` to a grid cell.
 //!
 //! Cube numbers (1, 8, 27, 64) fill each cell with a simple cubic lattice of `n^(1/3)` points
 //! per edge. Twice a cube (2, 16) is the body-centred cubic lattice and four times a cube (4, 32)
 //! the face-centred one: the densest packings with 2 and 4 points to a cubic unit, so a
 //! particle's neighbours stay as evenly spread as at 8 per cell with a half or a quarter of the
-//! particles. Every basis is centred in its unit, as the simple cubic point is.
+//! particles. Every basis is centred in its unit, as the simple cubic point is; the outer
+//! points of the centred bases sit a quarter unit from the unit's faces, so where a box is not a
+//! whole number of units the points past its faces are left out ([`Lattice::points`]).
 
 use nalgebra::Vector3;
 
@@ -71,8 +73,9 @@ impl Lattice {
         unit * unit * unit / self.basis.len() as f32
     }
 
-    /// Particles in a box of `extent` (m) at grid spacing `dx` (m): whole units, at least one
-    /// along each axis (f64, so that a mistyped `dx` gives a huge count, not an overflow).
+    /// Particles in a box of `extent` (m) at grid spacing `dx` (m) at most: the units
+    /// [`Lattice::points`] walks, each whole (f64, so that a mistyped `dx` gives a huge count,
+    /// not an overflow).
     pub fn count_in(&self, extent: &Vector3<f32>, dx: f32) -> f64 {
         let unit = self.unit_edge(dx) as f64;
         let units: f64 = extent
@@ -82,9 +85,30 @@ impl Lattice {
         units * self.basis.len() as f64
     }
 
+    /// Mean particles along a grid cell's edge, `particles_per_cell^(1/3)`: whole for the
+    /// simple cubic lattices.
+    pub fn mean_per_edge(&self) -> f32 {
+        self.units_per_edge as f32 * libm::cbrtf(self.basis.len() as f32)
+    }
+
+    /// How far the outermost points of a box filled by [`Lattice::points`] stand inside its
+    /// min faces (m) at grid spacing `dx` (m): half a spacing on the simple cubic lattice, a
+    /// quarter unit on the centred ones.
+    pub fn face_margin(&self, dx: f32) -> f32 {
+        let nearest = self
+            .basis
+            .iter()
+            .map(|b| b[0])
+            .fold(f32::INFINITY, f32::min);
+        nearest * self.unit_edge(dx)
+    }
+
     /// The points (m) of the units filling the box from `lo` with `extent` (m), unit by unit,
-    /// the units in x-major order; `each_plane` is called before every plane of units along x
-    /// and stops the walk when it returns false.
+    /// the units in x-major order: as many units as round `extent` (at least one) along each
+    /// axis, less the points that would lie past the box's max faces (none on the simple cubic
+    /// lattice, whose last point is at most half a unit past the last whole unit).
+    /// `each_plane` is called before every plane of units along x and stops the walk when it
+    /// returns false.
     pub fn points(
         &self,
         lo: &Vector3<f32>,
@@ -94,7 +118,11 @@ impl Lattice {
         mut point: impl FnMut(Vector3<f32>),
     ) -> bool {
         let unit = self.unit_edge(dx);
-        let counts = extent.map(|e| (e / unit).round().max(1.0) as usize);
+        let units = extent / unit;
+        let counts = units.map(|u| u.round().max(1.0) as usize);
+        // Points up to the box's faces, in units; a box thinner than half a unit keeps the
+        // unit's centre.
+        let reach = units.map(|u| u.max(0.5));
         for i in 0..counts.x {
             if !each_plane() {
                 return false;
@@ -103,7 +131,10 @@ impl Lattice {
                 for k in 0..counts.z {
                     let corner = Vector3::new(i as f32, j as f32, k as f32);
                     for b in self.basis {
-                        point(lo + (corner + Vector3::from(*b)) * unit);
+                        let p = corner + Vector3::from(*b);
+                        if p.x <= reach.x && p.y <= reach.y && p.z <= reach.z {
+                            point(lo + p * unit);
+                        }
                     }
                 }
             }
@@ -149,7 +180,7 @@ mod tests {
             );
             let centroid = points.iter().sum::<Vector3<f32>>() / n as f32;
             assert!(
-                (centroid - cell * 0.5).norm() < 1e-6 * dx.max(1.0),
+                (centroid - cell * 0.5).norm() < 1e-4 * dx,
                 "{n}: {centroid:?}"
             );
             let cubic_spacing = dx / libm::cbrtf(n as f32);
@@ -169,6 +200,43 @@ mod tests {
                         d > 0.999 * cubic_spacing,
                         "{n} per cell: points {d} m apart"
                     );
+                }
+            }
+        }
+    }
+
+    /// A box that is no whole number of units keeps every point inside it, the simple cubic
+    /// lattice every point it had, and each lattice its margin at the min faces.
+    #[test]
+    fn no_point_lies_past_the_box() {
+        let dx = 0.01_f32;
+        let lo = Vector3::new(-0.02, 0.003, -0.05);
+        for extent in [
+            Vector3::new(0.0296, 0.0333, 0.0262),
+            Vector3::new(0.004, 0.02, 0.0371),
+        ] {
+            for n in [1, 2, 4, 8, 16, 27, 32, 64] {
+                let lattice = Lattice::of(n).unwrap();
+                let mut points = Vec::new();
+                lattice.points(&lo, &extent, dx, || true, |x| points.push(x));
+                let hi = lo + extent;
+                let thin = |a: usize| extent[a] < 0.5 * lattice.unit_edge(dx);
+                for x in &points {
+                    for a in 0..3 {
+                        assert!(x[a] >= lo[a], "{n} per cell: {x:?} below {lo:?}");
+                        assert!(x[a] <= hi[a] || thin(a), "{n} per cell: {x:?} past {hi:?}");
+                    }
+                }
+                let margin = lattice.face_margin(dx);
+                for a in 0..3 {
+                    let lowest = points.iter().map(|x| x[a]).fold(f32::INFINITY, f32::min);
+                    assert!(
+                        (lowest - lo[a] - margin).abs() < 1e-6,
+                        "{n} per cell, axis {a}"
+                    );
+                }
+                if n == 1 || n == 8 || n == 27 || n == 64 {
+                    assert_eq!(points.len() as f64, lattice.count_in(&extent, dx), "{n}");
                 }
             }
         }
