@@ -57,11 +57,6 @@ impl Lattice {
             })
     }
 
-    /// Particles per grid cell.
-    pub fn particles_per_cell(&self) -> u32 {
-        self.units_per_edge.pow(3) * self.basis.len() as u32
-    }
-
     /// Edge of one cubic unit (m) at grid spacing `dx` (m).
     pub fn unit_edge(&self, dx: f32) -> f32 {
         dx / self.units_per_edge as f32
@@ -154,7 +149,7 @@ mod tests {
             let lattice = Lattice::of(n);
             assert_eq!(lattice.is_some(), allowed.contains(&n), "{n} per cell");
             if let Some(l) = lattice {
-                assert_eq!(l.particles_per_cell(), n);
+                assert_eq!(l.count_in(&Vector3::repeat(0.01), 0.01), n as f64);
             }
         }
     }

@@ -523,7 +523,7 @@ fn body_bounds(body: &BodyConfig) -> (Vector3<f32>, Vector3<f32>, Inside) {
     }
 }
 
-/// Particles on the body's lattice ([`Lattice`], aligned with the grid), inside the body; or
+/// Particles on the body's lattice ([`Lattice`], from its box's min corner), inside it; or
 /// [`FillStopped`] once `stop` is set: it is looked at before every lattice plane, so a stop
 /// waits for one plane of particles (the default bed at dx = 2.5 mm, 6.8 M particles, fills in
 /// 0.3 s).
