@@ -358,8 +358,16 @@ pub fn stencil_nodes(
 /// the stencil are dropped, those still in it keep their side, new ones get the side the
 /// weighted stencil nodes vote for.
 pub fn update_tags(old: u64, colours: &[NodeColour], s: &Stencil, base: [usize; 3]) -> u64 {
-    let in_range =
-        stencil_nodes(s, base).fold(0, |acc, (a, _, _)| acc | colours[a].bits) & AFFINITY_BITS;
+    // The colliders in range from the nodes' bits alone: most particles near a collider have
+    // none in range and keep no tag, with no weight computed.
+    let mut in_range = 0;
+    for i in 0..STENCIL {
+        for j in 0..STENCIL {
+            let row = node_in_arena(base[0] + i, base[1] + j, base[2]);
+            in_range |= colours[row].bits | colours[row + 1].bits | colours[row + 2].bits;
+        }
+    }
+    let in_range = in_range & AFFINITY_BITS;
     let kept = old & (in_range | in_range << 1);
     let mut new = in_range & !old;
     let mut tags = kept;

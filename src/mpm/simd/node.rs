@@ -10,9 +10,12 @@
 
 use std::ops::{Add, Mul};
 
+use crate::mpm::grid::ARENA_NODES;
+
 /// Four f32 lanes: one grid node's momentum and mass.
 #[cfg(target_arch = "x86_64")]
 #[derive(Clone, Copy, Debug)]
+#[repr(transparent)]
 pub struct F4(std::arch::x86_64::__m128);
 
 // SAFETY (every `unsafe` block in this impl): SSE belongs to the x86_64 baseline, so the
@@ -77,6 +80,9 @@ impl Node for F4 {
 /// registers otherwise (`SsePair`).
 pub trait NodePair: Node {
     fn from_halves(low: F4, high: F4) -> Self;
+    /// The pairs of `arena` as their halves in memory, `[grid's, transferred grid's]`: where
+    /// code compiled without the instruction set (the CPIC band's) adds to one half.
+    fn halves_of(arena: &mut [Self; ARENA_NODES]) -> &mut [[F4; 2]; ARENA_NODES];
     /// The grid's node.
     fn low(self) -> F4;
     /// The transferred grid's node.
@@ -85,6 +91,7 @@ pub trait NodePair: Node {
 
 /// [`NodePair`] as two [`F4`]: the baseline's.
 #[derive(Clone, Copy, Debug)]
+#[repr(C)]
 pub struct SsePair {
     low: F4,
     high: F4,
@@ -125,6 +132,12 @@ impl NodePair for SsePair {
         SsePair { low, high }
     }
     #[inline(always)]
+    fn halves_of(arena: &mut [Self; ARENA_NODES]) -> &mut [[F4; 2]; ARENA_NODES] {
+        // SAFETY: `SsePair` is `#[repr(C)]` with two `F4` fields, low first: the layout of
+        // `[F4; 2]`.
+        unsafe { &mut *(arena as *mut [Self; ARENA_NODES]).cast::<[[F4; 2]; ARENA_NODES]>() }
+    }
+    #[inline(always)]
     fn low(self) -> F4 {
         self.low
     }
@@ -142,6 +155,7 @@ impl NodePair for SsePair {
 /// scalar by the compiler) lost a third.
 #[cfg(target_arch = "x86_64")]
 #[derive(Clone, Copy, Debug)]
+#[repr(transparent)]
 pub(super) struct AvxPair(std::arch::x86_64::__m256);
 
 // SAFETY (every `unsafe` block below): an `AvxPair` is reachable only through
@@ -178,6 +192,13 @@ impl NodePair for AvxPair {
     #[inline(always)]
     fn from_halves(low: F4, high: F4) -> Self {
         AvxPair(unsafe { std::arch::x86_64::_mm256_set_m128(high.0, low.0) })
+    }
+    #[inline(always)]
+    fn halves_of(arena: &mut [Self; ARENA_NODES]) -> &mut [[F4; 2]; ARENA_NODES] {
+        // SAFETY: an `__m256` is eight f32 in memory, its low 128 bits (the pair's `low`) first,
+        // and `F4` is a transparent `__m128`: the layout of `[F4; 2]`, whose alignment (16) is
+        // less than the register's (32).
+        unsafe { &mut *(arena as *mut [Self; ARENA_NODES]).cast::<[[F4; 2]; ARENA_NODES]>() }
     }
     #[inline(always)]
     fn low(self) -> F4 {

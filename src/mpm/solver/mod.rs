@@ -171,6 +171,8 @@ impl Solver {
 
     /// Adds particles (undeformed, stress free).
     pub fn add_particles(&mut self, new: impl IntoIterator<Item = NewParticle>) {
+        // The sort takes every key afresh.
+        self.keys.clear();
         for p in new {
             self.max_speed_m_s = self.max_speed_m_s.max(p.velocity.norm());
             self.particles.push(p);
@@ -222,6 +224,7 @@ impl Solver {
 
     /// Removes the particles for which `keep(position)` is false; returns how many.
     pub fn remove_particles(&mut self, keep: impl Fn(&Vector3<f32>) -> bool) -> usize {
+        self.keys.clear();
         self.particles.retain(keep)
     }
 

@@ -168,34 +168,66 @@ impl WithNodes for P2gBlock<'_> {
     fn run<P: NodePair>(self) -> Self::Output {
         let cx = self.cx;
         match cx.transferred_blocks {
-            Some(transferred) if !cx.colours.near(self.pb) => {
-                particle_to_grid_pairs::<P>(cx, self.pb, transferred);
-                Vec::new()
-            }
-            _ => particle_to_grid_block(cx, self.pb),
+            Some(transferred) => particle_to_grid_pairs::<P>(cx, self.pb, transferred),
+            None => particle_to_grid_block(cx, self.pb),
         }
     }
 }
 
-/// P2G of a particle block away from colliders with AFLIP: each particle scatters to the grid
+/// P2G of a particle block with AFLIP: each particle away from colliders scatters to the grid
 /// and to the transferred grid in one pass of node pairs ([`NodePair`]), with the same weights
-/// and the same bits as [`particle_to_grid_block`]'s two passes.
+/// and the same bits as two passes of [`F4`]; each in the CPIC band adds to the pairs' halves
+/// ([`scatter_cpic`]). Returns the momentum the colliders took (empty where no particle is near
+/// one).
 #[inline(always)]
 fn particle_to_grid_pairs<P: NodePair>(
     cx: &P2gContext,
     pb: &ParticleBlock,
     transferred_blocks: &SharedBlocks,
-) {
+) -> Vec<ColliderImpulse> {
     let P2gContext {
+        particles,
+        colours,
+        colliders,
         slots,
         grid_blocks,
+        dx,
         shares,
+        band_as_bulk,
         ..
     } = *cx;
     let mut arena = [P::splat(0.0); ARENA_NODES];
+    let colour_arena = colours.arena(pb, slots);
+    let mut block_impulses = Vec::new();
     let b = shares.bulk;
     for p in pb.start..pb.end {
         let t = cx.particle(p);
+        let tags = particles.cpic_tags[p];
+        if let Some(colour) = colour_arena.as_ref().filter(|_| tags != 0) {
+            block_impulses.resize(colliders.len(), ColliderImpulse::default());
+            let particle = CpicParticle {
+                x: t.x,
+                v: particles.velocity[p],
+                mass: t.m,
+                tags,
+            };
+            let cpic = CpicTransfer {
+                colours: &colour[..],
+                colliders,
+                dx,
+            };
+            scatter_cpic(
+                P::halves_of(&mut arena),
+                band_as_bulk.then_some((&t.q_transfer, shares.band)),
+                &cpic,
+                &t.s,
+                local_base(&t.s, pb),
+                &particle,
+                &t.q_cells,
+                &mut block_impulses,
+            );
+            continue;
+        }
         let grid_terms = NodeTerms::of(&t.s, t.m, t.momentum, &t.q_cells);
         let transferred_terms = NodeTerms::of(&t.s, t.m * b, t.momentum * b, &(t.q_transfer * b));
         let terms = NodeTerms {
@@ -208,16 +240,18 @@ fn particle_to_grid_pairs<P: NodePair>(
     for (a, pair) in arena.iter().enumerate() {
         (low[a], high[a]) = (pair.low(), pair.high());
     }
-    // SAFETY: as in `particle_to_grid_block`.
+    // SAFETY: as in `particle_to_grid_block`; the transferred velocities are laid out like
+    // the grid's blocks.
     unsafe {
         grid_blocks.add_arena(&low, pb, slots);
         transferred_blocks.add_arena(&high, pb, slots);
     }
+    block_impulses
 }
 
-/// P2G of one particle block into its private 6x6x6 arena (and AFLIP's), then added to the
-/// grid's blocks it covers. Returns the momentum the colliders took (empty where no particle is
-/// near one).
+/// P2G of one particle block into its private 6x6x6 arena, then added to the grid's blocks it
+/// covers, without AFLIP (APIC, PIC; AFLIP's is [`particle_to_grid_pairs`]). Returns the
+/// momentum the colliders took (empty where no particle is near one).
 #[inline(always)]
 fn particle_to_grid_block(cx: &P2gContext, pb: &ParticleBlock) -> Vec<ColliderImpulse> {
     let P2gContext {
@@ -226,16 +260,10 @@ fn particle_to_grid_block(cx: &P2gContext, pb: &ParticleBlock) -> Vec<ColliderIm
         colliders,
         slots,
         grid_blocks,
-        transferred_blocks,
         dx,
-        shares,
-        band_as_bulk,
         ..
     } = *cx;
     let mut arena = [F4::splat(0.0); ARENA_NODES];
-    let mut transferred_arena = transferred_blocks
-        .as_ref()
-        .map(|_| [F4::splat(0.0); ARENA_NODES]);
     let colour_arena = colours.arena(pb, slots);
     let mut block_impulses = Vec::new();
     for p in pb.start..pb.end {
@@ -244,8 +272,8 @@ fn particle_to_grid_block(cx: &P2gContext, pb: &ParticleBlock) -> Vec<ColliderIm
             s,
             m,
             momentum,
-            q_transfer,
             q_cells,
+            ..
         } = cx.particle(p);
         let base = local_base(&s, pb);
         let tags = particles.cpic_tags[p];
@@ -265,10 +293,7 @@ fn particle_to_grid_block(cx: &P2gContext, pb: &ParticleBlock) -> Vec<ColliderIm
                 };
                 scatter_cpic(
                     &mut arena,
-                    transferred_arena
-                        .as_mut()
-                        .filter(|_| band_as_bulk)
-                        .map(|t| (t, &q_transfer, shares.band)),
+                    None,
                     &cx,
                     &s,
                     base,
@@ -284,21 +309,12 @@ fn particle_to_grid_block(cx: &P2gContext, pb: &ParticleBlock) -> Vec<ColliderIm
                     base,
                     &NodeTerms::of(&s, m, momentum, &q_cells),
                 );
-                if let Some(transferred) = &mut transferred_arena {
-                    let b = shares.bulk;
-                    let terms = NodeTerms::of(&s, m * b, momentum * b, &(q_transfer * b));
-                    scatter(transferred, &s, base, &terms);
-                }
             }
         }
     }
     // SAFETY: blocks of one phase have disjoint arenas (see
-    // `ParticleBlock::phase`), so these blocks are written by no other task; the
-    // transferred velocities are laid out like the grid's blocks.
+    // `ParticleBlock::phase`), so these blocks are written by no other task.
     unsafe { grid_blocks.add_arena(&arena, pb, slots) };
-    if let (Some(blocks), Some(transferred)) = (&transferred_blocks, &transferred_arena) {
-        unsafe { blocks.add_arena(transferred, pb, slots) };
-    }
     block_impulses
 }
 
@@ -355,16 +371,41 @@ fn scatter<N: Node>(
     }
 }
 
+/// The arena [`scatter_cpic`] adds to: the grid's alone ([`F4`] nodes), or node pairs as
+/// halves, `[grid's, transferred grid's]` ([`NodePair::halves_of`]).
+trait CpicArena {
+    /// Adds `grid` to the grid's node `a`, and `transferred` to the transferred grid's.
+    fn add(&mut self, a: usize, grid: F4, transferred: Option<F4>);
+}
+
+impl CpicArena for [F4; ARENA_NODES] {
+    #[inline(always)]
+    fn add(&mut self, a: usize, grid: F4, _: Option<F4>) {
+        self[a] = self[a] + grid;
+    }
+}
+
+impl CpicArena for [[F4; 2]; ARENA_NODES] {
+    #[inline(always)]
+    fn add(&mut self, a: usize, grid: F4, transferred: Option<F4>) {
+        let [grid_node, transferred_node] = &mut self[a];
+        *grid_node = *grid_node + grid;
+        if let Some(t) = transferred {
+            *transferred_node = *transferred_node + t;
+        }
+    }
+}
+
 /// [`scatter`] with CPIC: a node incompatible with the particle receives nothing; the collider
 /// of the conflict receives, at the node, the momentum the particle would have left there less
-/// what the ghost velocity gives back in G2P. With AFLIP, `transferred` is the transferred
-/// grid's arena, the particle's `Q` without stress and the share of its deviation it keeps:
-/// its compatible nodes receive there too, weighted by the share.
+/// what the ghost velocity gives back in G2P. With AFLIP, `transferred` is the particle's `Q`
+/// without stress and the share of its deviation it keeps: its compatible nodes receive in
+/// the transferred grid's half of `arena` too, weighted by the share.
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
-fn scatter_cpic(
-    arena: &mut [F4; ARENA_NODES],
-    mut transferred: Option<(&mut [F4; ARENA_NODES], &Matrix3<f32>, f32)>,
+fn scatter_cpic<A: CpicArena + ?Sized>(
+    arena: &mut A,
+    transferred: Option<(&Matrix3<f32>, f32)>,
     cx: &CpicTransfer,
     s: &Stencil,
     base: [usize; 3],
@@ -379,13 +420,12 @@ fn scatter_cpic(
         let conflict = conflicts(colour.bits, p.tags);
         if conflict == 0 {
             let node = F4::from_array([contribution.x, contribution.y, contribution.z, w * p.mass]);
-            arena[a] = arena[a] + node;
-            if let Some((transferred, q_transfer, share)) = &mut transferred {
-                let weight = w * *share;
-                let c = (momentum + *q_transfer * d) * weight;
-                let node = F4::from_array([c.x, c.y, c.z, weight * p.mass]);
-                transferred[a] = transferred[a] + node;
-            }
+            let transferred_node = transferred.map(|(q_transfer, share)| {
+                let weight = w * share;
+                let c = (momentum + q_transfer * d) * weight;
+                F4::from_array([c.x, c.y, c.z, weight * p.mass])
+            });
+            arena.add(a, node, transferred_node);
         } else {
             // The collider takes what the node would have received; G2P subtracts what the
             // ghost velocity gives back.

@@ -10,13 +10,22 @@ impl Solver {
     /// a pure function of the state: runs are deterministic for any thread count).
     pub(super) fn sort_particles_by_block(&mut self) {
         let grid = &self.grid;
-        self.keys.clear();
-        self.keys.par_extend(
-            self.particles
-                .position
-                .par_iter()
-                .map(|x| grid.block_key(x)),
-        );
+        let positions = &self.particles.position;
+        // A sleeping particle has not moved since its key was taken: it keeps it. (`keys` is
+        // cleared whenever particles come or go, and a block's sleep changes only after the sort.)
+        match &self.sleep {
+            Some(sleep) if self.keys.len() == positions.len() => self
+                .keys
+                .par_iter_mut()
+                .zip(positions.par_iter())
+                .filter(|(key, _)| !sleep.is_asleep(**key))
+                .for_each(|(key, x)| *key = grid.block_key(x)),
+            _ => {
+                self.keys.clear();
+                self.keys
+                    .par_extend(positions.par_iter().map(|x| grid.block_key(x)));
+            }
+        }
         if self.keys.par_windows(2).all(|w| w[0] <= w[1]) {
             return;
         }

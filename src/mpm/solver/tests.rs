@@ -337,3 +337,52 @@ fn a_stop_inside_a_substep_leaves_every_particle_whole() {
         "no stop landed inside G2P in {MOST_ATTEMPTS} attempts"
     );
 }
+
+/// The sort keeps a sleeping particle's block key instead of taking it afresh (the particle
+/// has not moved): after every sort each key is its particle's own, as blocks fall asleep and
+/// wake, and as particles are removed and added (which make the sort take every key afresh).
+#[test]
+fn sleeping_particles_keep_their_own_block_keys() {
+    let mut settings = settings(Vector3::zeros(), Walls::all(Wall::Slip));
+    settings.sleep = Some(crate::mpm::SleepSettings {
+        speed_m_s: 0.01,
+        after_s: 1e-3,
+        wake_margin_m: 0.0,
+    });
+    let mut s = Solver::new(settings, vec![jelly()]);
+    let mut rng = SmallRng::seed_from_u64(5);
+    // At rest on the low-x side (falls asleep), moving on the high-x side (some of it drifts
+    // into the resting sand and wakes it).
+    let mut particle = |x_lo: f32, x_hi: f32, speed: f32| NewParticle {
+        position: Vector3::new(
+            rng.random_range(x_lo..x_hi),
+            rng.random_range(0.05..0.25),
+            rng.random_range(0.05..0.25),
+        ),
+        velocity: Vector3::new(-speed, rng.random_range(-1.0..1.0) * speed, 0.0),
+        mass: 1e-3,
+        volume: 1e-6,
+        material: 0,
+    };
+    let resting: Vec<NewParticle> = (0..2000).map(|_| particle(0.05, 0.2, 0.0)).collect();
+    let moving: Vec<NewParticle> = (0..1000).map(|_| particle(0.22, 0.35, 0.3)).collect();
+    s.add_particles(resting);
+    s.add_particles(moving);
+    let mut most_asleep = 0;
+    for step in 0..120 {
+        if step == 60 {
+            // As many in as out: the count alone does not show that the keys moved.
+            // The first in sorted order go, so the others' indices shift.
+            let removed = s.remove_particles(|x| x.x >= 0.08);
+            assert!(removed > 0);
+            s.add_particles((0..removed).map(|_| particle(0.05, 0.1, 0.0)).collect::<Vec<_>>());
+        }
+        s.begin_substep(&[]);
+        let fresh: Vec<u32> = s.particles.position.iter().map(|x| s.grid.block_key(x)).collect();
+        assert!(s.keys == fresh, "substep {step}: a key is not its particle's");
+        most_asleep = most_asleep.max(s.asleep_blocks());
+        s.finish_substep(1e-4, &[]).unwrap();
+    }
+    assert!(most_asleep > 5, "{most_asleep} blocks asleep at most");
+    assert!(s.sleep_changes.woken > 0, "no block woke");
+}
