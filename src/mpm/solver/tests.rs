@@ -375,11 +375,23 @@ fn sleeping_particles_keep_their_own_block_keys() {
             // The first in sorted order go, so the others' indices shift.
             let removed = s.remove_particles(|x| x.x >= 0.08);
             assert!(removed > 0);
-            s.add_particles((0..removed).map(|_| particle(0.05, 0.1, 0.0)).collect::<Vec<_>>());
+            s.add_particles(
+                (0..removed)
+                    .map(|_| particle(0.05, 0.1, 0.0))
+                    .collect::<Vec<_>>(),
+            );
         }
         s.begin_substep(&[]);
-        let fresh: Vec<u32> = s.particles.position.iter().map(|x| s.grid.block_key(x)).collect();
-        assert!(s.keys == fresh, "substep {step}: a key is not its particle's");
+        let fresh: Vec<u32> = s
+            .particles
+            .position
+            .iter()
+            .map(|x| s.grid.block_key(x))
+            .collect();
+        assert!(
+            s.keys == fresh,
+            "substep {step}: a key is not its particle's"
+        );
         most_asleep = most_asleep.max(s.asleep_blocks());
         s.finish_substep(1e-4, &[]).unwrap();
     }
