@@ -53,6 +53,35 @@ pub enum Kernel {
 /// node plane counts as that far (the products `w D^-1 (x_i - x_p)` stay within +-1 anyway).
 const MIN_LINEAR_MOMENT: f32 = 1e-4;
 
+/// A kernel fixed at compile time, for a particle loop monomorphised on it: in the quadratic
+/// B-spline's loop the moment `D^-1` is the constant 4, so what is computed from it and from
+/// loop constants alone (G2P's `D^-1 / dx` and its inverses) is computed once per loop rather
+/// than once per particle: the same operations on the same values, so the same bits.
+pub trait KernelKind {
+    /// [`Stencil::of`] for this kernel.
+    fn stencil(xg: Vector3<f32>) -> Stencil;
+}
+
+/// [`Kernel::QuadraticBspline`] as a [`KernelKind`].
+pub struct QuadraticBsplineKernel;
+
+impl KernelKind for QuadraticBsplineKernel {
+    #[inline(always)]
+    fn stencil(xg: Vector3<f32>) -> Stencil {
+        Stencil::new(xg)
+    }
+}
+
+/// [`Kernel::Linear`] as a [`KernelKind`].
+pub struct LinearKernel;
+
+impl KernelKind for LinearKernel {
+    #[inline(always)]
+    fn stencil(xg: Vector3<f32>) -> Stencil {
+        Stencil::linear(xg)
+    }
+}
+
 impl Stencil {
     /// The stencil of a particle at `xg` (grid units) for `kernel`.
     #[inline(always)]

@@ -18,7 +18,7 @@ use crate::mpm::cpic::{
     ColliderMotion, PENALTY_MAX_CELLS, PENALTY_MIN_CELLS,
 };
 use crate::mpm::grid::{node_in_arena, ArenaSlot, Block, ParticleBlock, SparseGrid, ARENA_NODES};
-use crate::mpm::kernel::{Kernel, Stencil};
+use crate::mpm::kernel::{Kernel, KernelKind, LinearKernel, QuadraticBsplineKernel, Stencil};
 use crate::mpm::particles::Particles;
 use crate::mpm::simd::{array3, Node, NodePair, WithNodes, F4};
 
@@ -201,9 +201,10 @@ impl KeptDeviation {
 /// [`crate::mpm::simd::InstructionSet::dispatch_nodes`]:
 /// compiled with the instruction set's features (VEX encoding with AVX2; the same bits, as no
 /// product is fused).
-/// Only what is inlined gets them: the CPIC band's `gather_cpic`, `gather_compatible` and
-/// `push_back` (`#[inline(never)]`) stay compiled for the baseline; inlined, they changed the
-/// shipped scene's wall time by 0.99 (0.98-1.04), 5 pairs.
+/// Only what is inlined gets them: the CPIC band's `gather_cpic` and `push_back`
+/// (`#[inline(never)]`) stay compiled for the baseline; inlined, they (and the compatible
+/// gather since folded into `gather_cpic`) changed the shipped scene's wall time by 0.99
+/// (0.98-1.04), 5 pairs.
 struct G2pBlock<'a> {
     cx: &'a G2pContext<'a>,
     view: G2pView<'a>,
@@ -214,16 +215,24 @@ impl WithNodes for G2pBlock<'_> {
     type Output = (Vec<ColliderImpulse>, Vec<PenaltyContact>);
     #[inline(always)]
     fn run<P: NodePair>(self) -> Self::Output {
-        grid_to_particle_block::<P>(self.cx, self.view, self.pb)
+        match self.cx.kernel {
+            Kernel::QuadraticBspline => {
+                grid_to_particle_block::<P, QuadraticBsplineKernel>(self.cx, self.view, self.pb)
+            }
+            Kernel::Linear => {
+                grid_to_particle_block::<P, LinearKernel>(self.cx, self.view, self.pb)
+            }
+        }
     }
 }
 
 /// G2P of one particle block: loads its 6x6x6 arena of node velocities once, then per particle
 /// gathers v and C (with ghost velocities near colliders), advects, pushes back and clamps.
 /// Returns the CPIC impulses on the colliders (empty where no particle is near one) and the
-/// penalty contacts with colliders that yield, to be settled after G2P.
+/// penalty contacts with colliders that yield, to be settled after G2P. Compiled for the
+/// kernel `K`, so that what depends on the kernel's constant moment alone leaves the loop.
 #[inline(always)]
-fn grid_to_particle_block<P: NodePair>(
+fn grid_to_particle_block<P: NodePair, K: KernelKind>(
     cx: &G2pContext,
     view: G2pView,
     pb: &ParticleBlock,
@@ -240,7 +249,7 @@ fn grid_to_particle_block<P: NodePair>(
         affine_transfer,
         band_as_bulk,
         flip,
-        kernel,
+        kernel: _,
     } = *cx;
     let arena = load_arena(&grid.blocks, slots, pb);
     let arena_transferred = flip.map(|f| load_arena(f.transferred_velocity, slots, pb));
@@ -261,7 +270,7 @@ fn grid_to_particle_block<P: NodePair>(
     let colour_arena = colours.arena(pb, slots);
     for i in 0..view.position.len() {
         let x = view.position[i];
-        let s = Stencil::of(kernel, grid.to_grid(&x));
+        let s = K::stencil(grid.to_grid(&x));
         let base = local_base(&s, pb);
         let tags = view.cpic_tags[i];
         // Near a collider: CPIC's transfer over the compatible nodes, ghosts elsewhere.
@@ -279,21 +288,26 @@ fn grid_to_particle_block<P: NodePair>(
             mass: view.mass[i],
             tags,
         };
-        // The grid's velocity and gradient sums, and away from colliders with AFLIP the
-        // transferred grid's.
-        let ((mut v, b), bulk_transferred) = match (&cpic, &arena_pairs) {
+        // The grid's velocity and gradient sums, and with AFLIP the transferred grid's: as
+        // node pairs away from colliders, over the compatible nodes in the band (with
+        // `CpicBand::Bulk`).
+        let ((mut v, b), bulk_transferred, band_transferred) = match (&cpic, &arena_pairs) {
             (Some(cx), _) => {
                 if impulses.is_empty() {
                     impulses = vec![ColliderImpulse::default(); colliders.len()];
                 }
-                let gathered = gather_cpic(&arena, cx, &s, base, &particle, &mut impulses);
-                (gathered, None)
+                let transferred = arena_transferred
+                    .as_ref()
+                    .filter(|_| flip.is_some() && band_as_bulk);
+                let (gathered, compatible) =
+                    gather_cpic(&arena, transferred, cx, &s, base, &particle, &mut impulses);
+                (gathered, None, compatible)
             }
             (None, Some(pairs)) => {
                 let (grid, transferred) = gather_pair(pairs, &s, base);
-                (grid, Some(transferred))
+                (grid, Some(transferred), None)
             }
-            (None, None) => (gather(&arena, &s, base), None),
+            (None, None) => (gather(&arena, &s, base), None, None),
         };
         // C_p = sum w v_i (x_i - x_p)^T D^-1, with offsets in cells.
         let c = scale_columns(&b, &(s.inverse_moment / dx));
@@ -303,11 +317,11 @@ fn grid_to_particle_block<P: NodePair>(
         // (A `match`, not a closure: a closure the compiler does not inline runs without the
         // instruction set's features, and this one, with its gather, took 14 % of the shipped
         // scene's time.)
-        let kept = match (flip, &arena_transferred) {
-            (Some(f), Some(transferred)) if cpic.is_none() || band_as_bulk => {
+        let kept = match flip {
+            Some(f) if cpic.is_none() || band_as_bulk => {
                 let inverse_moment = s.inverse_moment / (dx * dx);
-                let deviation = match (&cpic, bulk_transferred) {
-                    (None, Some((v_transferred, b_transferred))) => {
+                let deviation = match (bulk_transferred, band_transferred) {
+                    (Some((v_transferred, b_transferred)), _) => {
                         let c_transferred = scale_columns(&b_transferred, &(s.inverse_moment / dx));
                         KeptDeviation::new(
                             f.shares.bulk,
@@ -316,14 +330,14 @@ fn grid_to_particle_block<P: NodePair>(
                             &inverse_moment,
                         )
                     }
-                    (Some(cx), _) => {
-                        let compatible = gather_compatible(transferred, cx, &s, base, tags);
+                    (None, Some(compatible)) => {
                         let deviation = compatible.deviation(&particle, &view.affine[i], dx);
                         KeptDeviation::of_velocity(f.shares.band, deviation)
                     }
-                    (None, None) => {
-                        unreachable!("with AFLIP the bulk gathers the transferred grid too")
-                    }
+                    (None, None) => unreachable!(
+                        "with AFLIP a particle gathers the transferred grid too: as a node pair \
+                         in the bulk, over its compatible nodes in the band"
+                    ),
                 };
                 Some(deviation.with_spin_for_advection(&v, dt, &inverse_moment))
             }
@@ -441,20 +455,34 @@ fn velocity_and_gradient(sums: [F4; 4], fx: &Vector3<f32>) -> VelocityAndGradien
 }
 
 /// [`gather`] with CPIC: an incompatible node contributes the ghost velocity instead of its own.
+/// With `transferred` (AFLIP's transferred grid, `CpicBand::Bulk`) it also sums that grid over
+/// the compatible nodes ([`CompatibleTransfer`]), in the same pass.
 #[inline(never)]
 fn gather_cpic(
     arena: &[F4; ARENA_NODES],
+    transferred: Option<&[F4; ARENA_NODES]>,
     cx: &CpicTransfer,
     s: &Stencil,
     base: [usize; 3],
     p: &CpicParticle,
     impulses: &mut [ColliderImpulse],
-) -> (Vector3<f32>, Matrix3<f32>) {
+) -> (VelocityAndGradient, Option<CompatibleTransfer>) {
     let (mut v, mut b) = (Vector3::zeros(), Matrix3::zeros());
+    let mut compatible = transferred.map(|_| CompatibleTransfer {
+        weighted_velocity: Vector3::zeros(),
+        weight: 0.0,
+        weighted_offset_cells: Vector3::zeros(),
+    });
     for (a, w, d) in stencil_nodes(s, base) {
         let colour = &cx.colours[a];
         let conflict = conflicts(colour.bits, p.tags);
         let v_node = if conflict == 0 {
+            if let (Some(sum), Some(transferred)) = (&mut compatible, transferred) {
+                let [x, y, z, _] = transferred[a].to_array();
+                sum.weighted_velocity += Vector3::new(x, y, z) * w;
+                sum.weight += w;
+                sum.weighted_offset_cells += d * w;
+            }
             let [x, y, z, _] = arena[a].to_array();
             Vector3::new(x, y, z)
         } else {
@@ -468,7 +496,7 @@ fn gather_cpic(
         v += v_node * w;
         b += v_node * w * d.transpose();
     }
-    (v, b)
+    ((v, b), compatible)
 }
 
 /// AFLIP's transferred grid seen by a particle in the CPIC band, summed over its compatible
@@ -491,31 +519,6 @@ impl CompatibleTransfer {
     fn deviation(&self, p: &CpicParticle, affine: &Matrix3<f32>, dx: f32) -> Vector3<f32> {
         p.v * self.weight + affine * (self.weighted_offset_cells * dx) - self.weighted_velocity
     }
-}
-
-/// Gathers [`CompatibleTransfer`] from the transferred velocities `arena`.
-#[inline(never)]
-fn gather_compatible(
-    arena: &[F4; ARENA_NODES],
-    cx: &CpicTransfer,
-    s: &Stencil,
-    base: [usize; 3],
-    tags: u64,
-) -> CompatibleTransfer {
-    let mut sum = CompatibleTransfer {
-        weighted_velocity: Vector3::zeros(),
-        weight: 0.0,
-        weighted_offset_cells: Vector3::zeros(),
-    };
-    for (a, w, d) in stencil_nodes(s, base) {
-        if conflicts(cx.colours[a].bits, tags) == 0 {
-            let [x, y, z, _] = arena[a].to_array();
-            sum.weighted_velocity += Vector3::new(x, y, z) * w;
-            sum.weight += w;
-            sum.weighted_offset_cells += d * w;
-        }
-    }
-    sum
 }
 
 /// CPIC penalty: a particle that ended up between [`PENALTY_MIN_CELLS`] and
