@@ -53,6 +53,9 @@ pub use stages::{Stage, StageTimes};
 pub struct Solver {
     pub settings: SolverSettings,
     pub materials: Vec<SolverMaterial>,
+    /// Read it freely; add and remove particles through [`Solver::add_particles`] and
+    /// [`Solver::remove_particles`] only, and leave positions and order to the substep: the
+    /// sort keeps the block keys of sleeping particles from one substep to the next.
     pub particles: Particles,
     grid: SparseGrid,
     /// Grid node index of the min and the max walls, per axis: the domain's, or an x window
