@@ -296,9 +296,7 @@ fn grid_to_particle_block<P: NodePair, K: KernelKind>(
                 if impulses.is_empty() {
                     impulses = vec![ColliderImpulse::default(); colliders.len()];
                 }
-                let transferred = arena_transferred
-                    .as_ref()
-                    .filter(|_| flip.is_some() && band_as_bulk);
+                let transferred = arena_transferred.as_ref().filter(|_| band_as_bulk);
                 let (gathered, compatible) =
                     gather_cpic(&arena, transferred, cx, &s, base, &particle, &mut impulses);
                 (gathered, None, compatible)

@@ -12,7 +12,7 @@ use super::cpic_grid::{add_impulses, CpicParticle, CpicTransfer, GridColours};
 use super::settings::KeptShares;
 use super::{local_base, scale_columns, CpicBand, Solver, Transfer};
 use crate::mpm::cpic::{
-    conflict_normal, conflicts, stencil_nodes, ColliderImpulse, ColliderMotion,
+    conflict_normal, conflicts, stencil_nodes, ColliderImpulse, ColliderMotion, NodeColour,
 };
 use crate::mpm::grid::{
     node_in_arena, ArenaSlot, Block, ParticleBlock, SparseGrid, ARENA_NODES, BLOCK_NODES,
@@ -151,6 +151,48 @@ impl P2gContext<'_> {
     }
 }
 
+impl P2gContext<'_> {
+    /// Scatters particle `p` (its terms `t`), tagged near a collider, with CPIC into `arena`
+    /// ([`scatter_cpic`]), and with `transferred` (AFLIP's `Q` without stress and the kept
+    /// share, `CpicBand::Bulk`) into the transferred grid's halves too.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn scatter_band<A: CpicArena + ?Sized>(
+        &self,
+        p: usize,
+        t: &ParticleTerms,
+        colour: &[NodeColour],
+        pb: &ParticleBlock,
+        arena: &mut A,
+        transferred: Option<(&Matrix3<f32>, f32)>,
+        impulses: &mut Vec<ColliderImpulse>,
+    ) {
+        impulses.resize(self.colliders.len(), ColliderImpulse::default());
+        let particle = CpicParticle {
+            x: t.x,
+            v: self.particles.velocity[p],
+            mass: t.m,
+            tags: self.particles.cpic_tags[p],
+        };
+        let cpic = CpicTransfer {
+            colours: colour,
+            colliders: self.colliders,
+            dx: self.dx,
+        };
+        let base = local_base(&t.s, pb);
+        scatter_cpic(
+            arena,
+            transferred,
+            &cpic,
+            &t.s,
+            base,
+            &particle,
+            &t.q_cells,
+            impulses,
+        );
+    }
+}
+
 /// P2G of one particle block, as the work of
 /// [`crate::mpm::simd::InstructionSet::dispatch_nodes`]:
 /// compiled with the instruction set's features (VEX encoding with AVX2; the same bits, as no
@@ -188,10 +230,8 @@ fn particle_to_grid_pairs<P: NodePair>(
     let P2gContext {
         particles,
         colours,
-        colliders,
         slots,
         grid_blocks,
-        dx,
         shares,
         band_as_bulk,
         ..
@@ -204,26 +244,15 @@ fn particle_to_grid_pairs<P: NodePair>(
         let t = cx.particle(p);
         let tags = particles.cpic_tags[p];
         if let Some(colour) = colour_arena.as_ref().filter(|_| tags != 0) {
-            block_impulses.resize(colliders.len(), ColliderImpulse::default());
-            let particle = CpicParticle {
-                x: t.x,
-                v: particles.velocity[p],
-                mass: t.m,
-                tags,
-            };
-            let cpic = CpicTransfer {
-                colours: &colour[..],
-                colliders,
-                dx,
-            };
-            scatter_cpic(
-                P::halves_of(&mut arena),
-                band_as_bulk.then_some((&t.q_transfer, shares.band)),
-                &cpic,
-                &t.s,
-                local_base(&t.s, pb),
-                &particle,
-                &t.q_cells,
+            let transferred = band_as_bulk.then_some((&t.q_transfer, shares.band));
+            let arena = P::halves_of(&mut arena);
+            cx.scatter_band(
+                p,
+                &t,
+                &colour[..],
+                pb,
+                arena,
+                transferred,
                 &mut block_impulses,
             );
             continue;
@@ -257,58 +286,30 @@ fn particle_to_grid_block(cx: &P2gContext, pb: &ParticleBlock) -> Vec<ColliderIm
     let P2gContext {
         particles,
         colours,
-        colliders,
         slots,
         grid_blocks,
-        dx,
         ..
     } = *cx;
     let mut arena = [F4::splat(0.0); ARENA_NODES];
     let colour_arena = colours.arena(pb, slots);
     let mut block_impulses = Vec::new();
     for p in pb.start..pb.end {
-        let ParticleTerms {
-            x,
-            s,
-            m,
-            momentum,
-            q_cells,
-            ..
-        } = cx.particle(p);
-        let base = local_base(&s, pb);
-        let tags = particles.cpic_tags[p];
+        let t = cx.particle(p);
         match &colour_arena {
-            Some(colour) if tags != 0 => {
-                block_impulses.resize(colliders.len(), ColliderImpulse::default());
-                let particle = CpicParticle {
-                    x,
-                    v: particles.velocity[p],
-                    mass: m,
-                    tags,
-                };
-                let cx = CpicTransfer {
-                    colours: &colour[..],
-                    colliders,
-                    dx,
-                };
-                scatter_cpic(
+            Some(colour) if particles.cpic_tags[p] != 0 => {
+                cx.scatter_band(
+                    p,
+                    &t,
+                    &colour[..],
+                    pb,
                     &mut arena,
                     None,
-                    &cx,
-                    &s,
-                    base,
-                    &particle,
-                    &q_cells,
                     &mut block_impulses,
                 );
             }
             _ => {
-                scatter(
-                    &mut arena,
-                    &s,
-                    base,
-                    &NodeTerms::of(&s, m, momentum, &q_cells),
-                );
+                let terms = NodeTerms::of(&t.s, t.m, t.momentum, &t.q_cells);
+                scatter(&mut arena, &t.s, local_base(&t.s, pb), &terms);
             }
         }
     }
