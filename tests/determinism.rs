@@ -55,8 +55,9 @@ const GOLDEN: [Case; 4] = [
 ];
 
 /// The coupled run of the code-path checks: the robot on a cropped 1.25 cm bed for 0.04 s
-/// (about 19 k particles, 144 substeps at the shipped CFL 0.8; too short for sand to fall asleep): sand, SVD, CPIC, rapier's multibody and the gait all
-/// run, and under emulation it takes about a minute.
+/// (about 19 k particles, 144 substeps at the shipped CFL 0.8; with the shipped sleep settings
+/// 110 blocks fall asleep in it): sand, SVD, CPIC, sleeping sand, rapier's multibody and the
+/// gait all run, and under emulation it takes about a minute.
 const PATHS: Case = Case {
     name: "robot_on_small_bed",
     scene: "config/robot_on_sand.yaml",
