@@ -218,3 +218,56 @@ fn generator_writes_intermediate_curvatures_into_a_fresh_folder() {
     let err = write_hexapod_urdf(&params, path).unwrap_err().to_string();
     assert!(err.contains("curvature_per_m = 100"), "{err}");
 }
+
+/// `sandstep urdf` places the hips where its options say (the assumed layout of
+/// `docs/robot.md` is one choice among those a study measures), and refuses a wrong count.
+#[test]
+fn urdf_command_places_the_hips_it_is_given() {
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("low_hips.urdf");
+    let urdf = |extra: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_sandstep"))
+            .arg("urdf")
+            .arg("-o")
+            .arg(&path)
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let out = urdf(&[
+        "--hip-x-m=0.05,0.001,-0.055",
+        "--hip-y-m=0.03",
+        "--hip-z-m=-0.004",
+        "--body-height-m=0.02",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let robot = urdf_rs::read_file(&path).unwrap();
+    let origin = |name: &str| {
+        let joint = robot.joints.iter().find(|j| j.name == name).unwrap();
+        joint.origin.xyz.0
+    };
+    let close = |a: [f64; 3], b: [f64; 3]| a.iter().zip(b).all(|(a, b)| (a - b).abs() < 1e-9);
+    for (joint, expected) in [
+        ("leg_front_left_joint", [0.05, 0.03, -0.004]),
+        ("leg_middle_right_joint", [0.001, -0.03, -0.004]),
+        ("leg_rear_left_joint", [-0.055, 0.03, -0.004]),
+    ] {
+        assert!(
+            close(origin(joint), expected),
+            "{joint}: {:?}",
+            origin(joint)
+        );
+    }
+    let body = robot.links.iter().find(|l| l.name == "base_link").unwrap();
+    match &body.collision[0].geometry {
+        Geometry::Box { size } => assert!((size.0[2] - 0.02).abs() < 1e-9, "{:?}", size.0),
+        other => panic!("body collision is {other:?}"),
+    }
+    let out = urdf(&["--hip-x-m=0.05,0.0"]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--hip-x-m"));
+}

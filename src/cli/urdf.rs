@@ -39,6 +39,19 @@ pub struct UrdfArgs {
     /// Total robot mass, legs included (kg); the body gets the rest.
     #[arg(long, default_value_t = HexapodParams::default().total_mass_kg)]
     pub total_mass_kg: f64,
+    /// Body (belly) height along z (m; assumed, not published).
+    #[arg(long, default_value_t = HexapodParams::default().body_height_m)]
+    pub body_height_m: f64,
+    /// Hip x positions in the body frame, front, middle, rear (m; assumed): three
+    /// comma-separated values, e.g. 0.06,0,-0.06 (the default).
+    #[arg(long, value_parser = three_numbers, allow_hyphen_values = true)]
+    pub hip_x_m: Option<[f64; 3]>,
+    /// Lateral distance of each leg's mid-plane from the body's mid-plane (m; assumed).
+    #[arg(long, default_value_t = HexapodParams::default().hip_y_m)]
+    pub hip_y_m: f64,
+    /// Height of the hip axes above the body's centre (m; assumed), negative below it.
+    #[arg(long, default_value_t = HexapodParams::default().hip_z_m, allow_negative_numbers = true)]
+    pub hip_z_m: f64,
 }
 
 impl UrdfArgs {
@@ -50,6 +63,10 @@ impl UrdfArgs {
         p.legs.thickness_m = self.thickness_m;
         p.legs.density_kg_m3 = self.density_kg_m3;
         p.total_mass_kg = self.total_mass_kg;
+        p.body_height_m = self.body_height_m;
+        p.hip_x_m = self.hip_x_m.unwrap_or(p.hip_x_m);
+        p.hip_y_m = self.hip_y_m;
+        p.hip_z_m = self.hip_z_m;
         p.with_curvature(if self.reversed { -1.0 } else { self.curvature })
     }
 
@@ -63,6 +80,21 @@ impl UrdfArgs {
             })
         })
     }
+}
+
+/// Parses `a,b,c` into three numbers.
+fn three_numbers(text: &str) -> Result<[f64; 3], String> {
+    let numbers: Vec<f64> = text
+        .split(',')
+        .map(|n| n.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("'{text}': {e}"))?;
+    numbers.try_into().map_err(|n: Vec<f64>| {
+        format!(
+            "'{text}': 3 comma-separated numbers needed, got {}",
+            n.len()
+        )
+    })
 }
 
 /// Runs `sandstep urdf`: writes the URDF and mesh, prints what was written.
