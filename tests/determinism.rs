@@ -199,6 +199,9 @@ fn golden_runs_give_the_pinned_bits() {
 #[test]
 fn thread_count_and_glibc_variants_do_not_change_the_bits() {
     let reference = native(&PATHS, 2);
+    // The check covers sleeping sand only if some falls asleep.
+    let fell_asleep = reference["metrics"]["blocks_fell_asleep"].as_u64();
+    assert!(fell_asleep > Some(0), "blocks_fell_asleep: {fell_asleep:?}");
     for threads in [1, 3] {
         assert_eq!(
             digest(&native(&PATHS, threads)),

@@ -43,8 +43,13 @@ pub struct UrdfArgs {
     #[arg(long, default_value_t = HexapodParams::default().body_height_m)]
     pub body_height_m: f64,
     /// Hip x positions in the body frame, front, middle, rear (m; assumed): three
-    /// comma-separated values, e.g. 0.06,0,-0.06 (the default).
-    #[arg(long, value_parser = three_numbers, allow_hyphen_values = true)]
+    /// comma-separated values. Default: the assumed layout of docs/robot.md.
+    #[arg(
+        long,
+        value_parser = three_numbers,
+        allow_hyphen_values = true,
+        value_name = "FRONT,MIDDLE,REAR"
+    )]
     pub hip_x_m: Option<[f64; 3]>,
     /// Lateral distance of each leg's mid-plane from the body's mid-plane (m; assumed).
     #[arg(long, default_value_t = HexapodParams::default().hip_y_m)]
@@ -88,13 +93,10 @@ fn three_numbers(text: &str) -> Result<[f64; 3], String> {
         .split(',')
         .map(|n| n.trim().parse::<f64>())
         .collect::<Result<_, _>>()
-        .map_err(|e| format!("'{text}': {e}"))?;
-    numbers.try_into().map_err(|n: Vec<f64>| {
-        format!(
-            "'{text}': 3 comma-separated numbers needed, got {}",
-            n.len()
-        )
-    })
+        .map_err(|e| e.to_string())?;
+    numbers
+        .try_into()
+        .map_err(|n: Vec<f64>| format!("3 comma-separated numbers needed, got {}", n.len()))
 }
 
 /// Runs `sandstep urdf`: writes the URDF and mesh, prints what was written.
@@ -154,5 +156,19 @@ mod tests {
         assert!(out.is_file() && leg_mesh_path(&out).is_file());
         let err = urdf(&parse(&["--curvature", "1.5", "-o", out_str]).unwrap());
         assert!(err.unwrap_err().to_string().contains("curvature_per_m"));
+        let err = urdf(&parse(&["--hip-y-m=0.01", "-o", out_str]).unwrap());
+        assert!(err.unwrap_err().to_string().contains("hip_y_m"));
+    }
+
+    #[test]
+    fn hip_options_take_negative_numbers_in_either_form() {
+        let p = parse(&["--hip-z-m", "-0.004", "--hip-x-m", "-0.05,0,0.05"])
+            .unwrap()
+            .params();
+        assert_eq!((p.hip_z_m, p.hip_x_m), (-0.004, [-0.05, 0.0, 0.05]));
+        let p = parse(&["--hip-x-m=0.07, 0.01 ,-0.07"]).unwrap().params();
+        assert_eq!(p.hip_x_m, [0.07, 0.01, -0.07]);
+        assert!(parse(&["--hip-x-m", "0.05,0"]).is_err());
+        assert!(parse(&["--hip-x-m", "0.05,x,0"]).is_err());
     }
 }

@@ -524,13 +524,24 @@ impl HexapodParams {
                 return Err((name, value, "must be a positive number".into()));
             }
         }
-        if self
-            .hip_x_m
-            .iter()
-            .chain([&self.hip_z_m])
-            .any(|x| !x.is_finite())
-        {
-            return Err(("hip_x_m", f64::NAN, "hip positions must be finite".into()));
+        if let Some(x) = self.hip_x_m.iter().find(|x| !x.is_finite()) {
+            return Err(("hip_x_m", *x, "hip positions must be finite".into()));
+        }
+        if !self.hip_z_m.is_finite() {
+            return Err(("hip_z_m", self.hip_z_m, "must be finite".into()));
+        }
+        // Closer in, a leg's inner face would lie inside the belly (the robot does not
+        // collide with itself).
+        let flush_m = (self.body_width_m + self.legs.width_m) / 2.0;
+        if self.hip_y_m < flush_m {
+            return Err((
+                "hip_y_m",
+                self.hip_y_m,
+                format!(
+                    "must be at least {flush_m} m (half the body's and a leg's widths): a \
+                     leg would cut into the belly"
+                ),
+            ));
         }
         if self.body_mass_kg() <= 0.0 {
             return Err((
@@ -824,11 +835,31 @@ mod tests {
         let mut p = HexapodParams::default();
         p.legs.curvature_per_m = 60.0;
         assert_eq!(p.validate().unwrap_err().0, "curvature_per_m");
-        let p = HexapodParams {
+        let named = |p: HexapodParams| p.validate().err().map(|e| e.0);
+        let d = HexapodParams::default;
+        let light = HexapodParams {
             total_mass_kg: 0.01,
-            ..Default::default()
+            ..d()
         };
-        assert_eq!(p.validate().unwrap_err().0, "total_mass_kg");
+        assert_eq!(named(light), Some("total_mass_kg"));
+        let hip_z_m = f64::INFINITY;
+        assert_eq!(named(HexapodParams { hip_z_m, ..d() }), Some("hip_z_m"));
+        // Legs 1 cm wide beside a 2 cm belly: 1.5 cm is flush, 1.4 cm cuts into it.
+        let (inside, flush) = (0.014, 0.015);
+        assert_eq!(
+            named(HexapodParams {
+                hip_y_m: inside,
+                ..d()
+            }),
+            Some("hip_y_m")
+        );
+        assert_eq!(
+            named(HexapodParams {
+                hip_y_m: flush,
+                ..d()
+            }),
+            None
+        );
         assert!(HexapodParams::default().validate().is_ok());
         assert!(HexapodParams::reversed().validate().is_ok());
     }
