@@ -466,16 +466,20 @@ fn gather_cpic(
     impulses: &mut [ColliderImpulse],
 ) -> (VelocityAndGradient, Option<CompatibleTransfer>) {
     let (mut v, mut b) = (Vector3::zeros(), Matrix3::zeros());
-    let mut compatible = transferred.map(|_| CompatibleTransfer {
-        weighted_velocity: Vector3::zeros(),
-        weight: 0.0,
-        weighted_offset_cells: Vector3::zeros(),
+    // The transferred grid with its running compatible sum.
+    let mut compatible = transferred.map(|arena| {
+        let sum = CompatibleTransfer {
+            weighted_velocity: Vector3::zeros(),
+            weight: 0.0,
+            weighted_offset_cells: Vector3::zeros(),
+        };
+        (arena, sum)
     });
     for (a, w, d) in stencil_nodes(s, base) {
         let colour = &cx.colours[a];
         let conflict = conflicts(colour.bits, p.tags);
         let v_node = if conflict == 0 {
-            if let (Some(sum), Some(transferred)) = (&mut compatible, transferred) {
+            if let Some((transferred, sum)) = &mut compatible {
                 let [x, y, z, _] = transferred[a].to_array();
                 sum.weighted_velocity += Vector3::new(x, y, z) * w;
                 sum.weight += w;
@@ -494,7 +498,7 @@ fn gather_cpic(
         v += v_node * w;
         b += v_node * w * d.transpose();
     }
-    ((v, b), compatible)
+    ((v, b), compatible.map(|(_, sum)| sum))
 }
 
 /// AFLIP's transferred grid seen by a particle in the CPIC band, summed over its compatible

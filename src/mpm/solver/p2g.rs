@@ -149,9 +149,7 @@ impl P2gContext<'_> {
             q_cells,
         }
     }
-}
 
-impl P2gContext<'_> {
     /// Scatters particle `p` (its terms `t`), tagged near a collider, with CPIC into `arena`
     /// ([`scatter_cpic`]), and with `transferred` (AFLIP's `Q` without stress and the kept
     /// share, `CpicBand::Bulk`) into the transferred grid's halves too.
