@@ -19,10 +19,11 @@ use sandstep::terrain::POPPY_SEEDS_ZETA_N_M3;
 use serde_json::Value;
 
 /// The columns `docs/experiment.md` documents for `results.csv`.
-const CSV_COLUMNS: [&str; 13] = [
+const CSV_COLUMNS: [&str; 14] = [
     "curvature_per_r",
     "frequency_hz",
     "terrain_model",
+    "start_offset_x_m",
     "mean_speed_m_s",
     "speed_per_cycle_mean_m_s",
     "speed_per_cycle_std_m_s",
@@ -245,7 +246,7 @@ fn a_failing_run_is_recorded_and_the_command_fails_after_writing_everything() {
     assert!(status.contains("robot.gait.frequency_hz"), "{status}");
     let csv = std::fs::read_to_string(out.join("results.csv")).unwrap();
     assert!(
-        csv.lines().nth(1).unwrap().starts_with("1,1000,mpm,,"),
+        csv.lines().nth(1).unwrap().starts_with("1,1000,mpm,0,,"),
         "{csv}"
     );
     assert!(out.join("speed_vs_curvature.png").is_file());
@@ -406,5 +407,57 @@ fn resume_keeps_finished_runs_and_runs_the_rest() {
         stderr.contains(&format!("cannot resume from {}", json_path.display()))
             && stderr.contains("different experiment"),
         "{stderr}"
+    );
+}
+
+#[test]
+fn each_start_is_a_run_and_the_summary_pools_them() {
+    // Two starts 1 cm apart on RFT ground, which is flat and the same everywhere: the robot
+    // walks the same walk shifted by the offset, and the summary has one cell of two starts.
+    let tmp = tempfile::tempdir().unwrap();
+    let file = tmp.path().join("starts.yaml");
+    let offset_m = 0.01;
+    std::fs::write(
+        &file,
+        format!(
+            "name: starts\ncurvatures_per_r: [1]\nfrequencies_hz: [2]\nterrain_models: [rft]\n\
+             settle_s: 0\ncycles: 1\nstart_offsets_x_m: [0, {offset_m}]\n"
+        ),
+    )
+    .unwrap();
+    let out = tmp.path().join("out");
+    let output = Command::new(env!("CARGO_BIN_EXE_sandstep"))
+        .args(["experiment", file.to_str().unwrap(), "--json", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let v: Value = serde_json::from_slice(&output.stdout).unwrap();
+    let runs = v["runs"].as_array().unwrap();
+    let names: Vec<&str> = runs.iter().map(|r| r["run"].as_str().unwrap()).collect();
+    assert_eq!(names, ["k1_f2hz_rft_start0", "k1_f2hz_rft_start1"]);
+    let end_x = |r: &Value| r["final_position_m"][0].as_f64().unwrap();
+    let shift_m = end_x(&runs[1]) - end_x(&runs[0]);
+    assert!(
+        (shift_m - offset_m).abs() < 0.002,
+        "ends {} m apart, started {offset_m} m apart",
+        shift_m
+    );
+    assert_eq!(runs[1]["start_offset_x_m"], offset_m);
+    let summary = std::fs::read_to_string(out.join("summary.csv")).unwrap();
+    let lines: Vec<&str> = summary.lines().collect();
+    assert_eq!(lines.len(), 2, "{summary}");
+    assert!(lines[1].starts_with("1,2,rft,2,2,"), "{summary}");
+    let cell = &v["cells"][0];
+    let mean = (number(&runs[0], "speed_per_cycle_mean_m_s")
+        + number(&runs[1], "speed_per_cycle_mean_m_s"))
+        / 2.0;
+    assert!(
+        (number(cell, "speed_mean_m_s") - mean).abs() < 1e-12,
+        "{cell}"
     );
 }

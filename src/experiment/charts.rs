@@ -8,7 +8,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use super::config::TerrainModel;
-use super::results::RunResult;
+use super::results::{summarize, RunResult};
 use crate::analysis::plots::{
     chart, draw_legend, legend_line, line_style, padded_range, register_fonts, DrawError,
     DrawResult, PlotError, LABEL_FONT_SIZE, MARKER_RADIUS_PX, PLOT_SIZE,
@@ -18,27 +18,55 @@ use crate::analysis::plots::{
 pub const SPEED_CHART: &str = "speed_vs_curvature";
 /// Width of a panel (px); the chart is at least [`PLOT_SIZE`] wide.
 const PANEL_WIDTH_PX: u32 = 800;
+/// Radius of the hollow marker of one start's speed (px).
+const START_MARKER_RADIUS_PX: u32 = 3;
 /// Half the width of an error bar's caps (curvature units, 1/R).
 const ERROR_CAP_HALF_WIDTH: f64 = 0.025;
 
-/// One plotted point: curvature, mean per-cycle speed, its standard deviation.
+/// One plotted point: curvature, mean speed, its spread (one standard deviation).
 type Point = (f64, f64, f64);
 
 /// The points of one terrain model at one frequency, by curvature; failed runs are left out.
+/// A cell with several completed starts plots their mean and its standard deviation over the
+/// starts; a cell with one, that run's mean and the standard deviation of its cycles.
 fn points(runs: &[RunResult], model: TerrainModel, frequency_hz: f64) -> Vec<Point> {
-    let mut points: Vec<Point> = runs
+    let runs: Vec<RunResult> = runs
         .iter()
-        .filter(|r| r.is_ok() && r.terrain_model == model.name() && r.frequency_hz == frequency_hz)
-        .filter_map(|r| {
+        .filter(|r| r.terrain_model == model.name() && r.frequency_hz == frequency_hz)
+        .cloned()
+        .collect();
+    let mut points: Vec<Point> = summarize(&runs)
+        .iter()
+        .filter_map(|cell| {
+            let spread = if cell.completed > 1 {
+                cell.speed_std_m_s
+            } else {
+                runs.iter()
+                    .find(|r| r.curvature_per_r == cell.curvature_per_r && r.is_ok())
+                    .and_then(|r| r.speed_per_cycle_std_m_s)
+            };
             Some((
-                r.curvature_per_r,
-                r.speed_per_cycle_mean_m_s?,
-                r.speed_per_cycle_std_m_s.unwrap_or(0.0),
+                cell.curvature_per_r,
+                cell.speed_mean_m_s?,
+                spread.unwrap_or(0.0),
             ))
         })
         .collect();
     points.sort_by(|a, b| a.0.total_cmp(&b.0));
     points
+}
+
+/// Each completed run's speed (curvature, mean per-cycle speed) of one model and frequency.
+fn starts(runs: &[RunResult], model: TerrainModel, frequency_hz: f64) -> Vec<(f64, f64)> {
+    runs.iter()
+        .filter(|r| r.is_ok() && r.terrain_model == model.name() && r.frequency_hz == frequency_hz)
+        .filter_map(|r| Some((r.curvature_per_r, r.speed_per_cycle_mean_m_s?)))
+        .collect()
+}
+
+/// Whether any cell of `runs` has several starts.
+fn several_starts(runs: &[RunResult]) -> bool {
+    summarize(runs).iter().any(|cell| cell.starts > 1)
 }
 
 /// Writes `speed_vs_curvature.png` and `.svg` into `dir`: a panel per model in `models`, a
@@ -117,6 +145,11 @@ fn draw_panel<DB: DrawingBackend>(
         "speed along x, mean per gait cycle (m/s)",
     )?;
     let mut any = false;
+    let bars = if several_starts(runs) {
+        "mean over starts, bars: +-1 std over starts, dots: each start"
+    } else {
+        "bars: +-1 std of the cycles"
+    };
     for (i, &f) in frequencies_hz.iter().enumerate() {
         let pts = points(runs, model, f);
         if pts.is_empty() {
@@ -129,12 +162,19 @@ fn draw_panel<DB: DrawingBackend>(
                 pts.iter().map(|&(k, v, _)| (k, v)),
                 line_style(color),
             ))?
-            .label(format!("{f} Hz (bars: +-1 std of the cycles)"))
+            .label(format!("{f} Hz ({bars})"))
             .legend(legend_line(color));
         chart.draw_series(
             pts.iter()
                 .map(|&(k, v, _)| Circle::new((k, v), MARKER_RADIUS_PX, color.filled())),
         )?;
+        if several_starts(runs) {
+            chart.draw_series(
+                starts(runs, model, f)
+                    .into_iter()
+                    .map(|(k, v)| Circle::new((k, v), START_MARKER_RADIUS_PX, color)),
+            )?;
+        }
         // Error bars: a vertical line from v - s to v + s with caps.
         chart.draw_series(pts.iter().flat_map(|&(k, v, s)| {
             let c = ERROR_CAP_HALF_WIDTH;
@@ -202,5 +242,33 @@ mod tests {
             svg.contains("RFT") && svg.contains("no results"),
             "{svg:.200}"
         );
+    }
+
+    #[test]
+    fn several_starts_plot_their_mean_and_spread() {
+        let start = |v: f64, cycles_std: f64| RunResult {
+            curvature_per_r: 1.0,
+            frequency_hz: 4.0,
+            terrain_model: "mpm".into(),
+            speed_per_cycle_mean_m_s: Some(v),
+            speed_per_cycle_std_m_s: Some(cycles_std),
+            status: "ok".into(),
+            ..RunResult::default()
+        };
+        let one = [start(0.3, 0.05)];
+        assert_eq!(points(&one, TerrainModel::Mpm, 4.0), [(1.0, 0.3, 0.05)]);
+        assert!(!several_starts(&one));
+        let three = [start(0.3, 0.05), start(0.4, 0.05), start(0.5, 0.05)];
+        let p = points(&three, TerrainModel::Mpm, 4.0);
+        assert_eq!(p.len(), 1);
+        assert!(
+            (p[0].1 - 0.4).abs() < 1e-12 && (p[0].2 - 0.1).abs() < 1e-12,
+            "{p:?}"
+        );
+        assert_eq!(starts(&three, TerrainModel::Mpm, 4.0).len(), 3);
+        let dir = tempfile::tempdir().unwrap();
+        let files = write_speed_chart(&three, &[TerrainModel::Mpm], &[4.0], dir.path()).unwrap();
+        let svg = std::fs::read_to_string(&files[1]).unwrap();
+        assert!(svg.contains("std over starts"), "{svg:.200}");
     }
 }

@@ -64,6 +64,12 @@ pub struct ExperimentConfig {
     /// Terrain models (`mpm`, `rft`): the scene's `terrain.model`. Default [mpm, rft].
     #[serde(default = "default_terrain_models")]
     pub terrain_models: Vec<TerrainModel>,
+    /// Where the robot starts along x, as offsets from the base scene's
+    /// `robot.initial_pose.position_m[0]` (m): every run is repeated from each. The walk is
+    /// chaotic, so a speed from one start is not a measurement; a few millimetres apart give
+    /// independent walks. Default [0] (one start).
+    #[serde(default = "default_start_offsets_x_m")]
+    pub start_offsets_x_m: Vec<f64>,
     /// Simulated time to settle before measuring (s), >= 0: the measured cycles are the first
     /// that start at or after it ([`Experiment::measure_from_s`]). Default 0.5.
     #[serde(default = "default_settle_s")]
@@ -138,6 +144,9 @@ fn default_frequencies() -> Vec<f64> {
 }
 fn default_terrain_models() -> Vec<TerrainModel> {
     vec![TerrainModel::Mpm, TerrainModel::Rft]
+}
+fn default_start_offsets_x_m() -> Vec<f64> {
+    vec![0.0]
 }
 fn default_settle_s() -> f64 {
     0.5
@@ -232,6 +241,12 @@ impl Experiment {
             &|f| f > 0.0 && f.is_finite(),
             "a finite number > 0 (Hz)",
         )?;
+        list(
+            "start_offsets_x_m",
+            &c.start_offsets_x_m,
+            &|x| x.is_finite(),
+            "a finite number (m)",
+        )?;
         if c.terrain_models.is_empty() {
             return Err(self.invalid("terrain_models", "needs at least one of mpm, rft"));
         }
@@ -306,26 +321,34 @@ impl Experiment {
         GaitWindow::after_settling(self.config.settle_s, self.config.cycles, frequency_hz).until_s
     }
 
-    /// Every run of the sweep: by terrain model, then frequency, then curvature.
+    /// Every run of the sweep: by terrain model, then frequency, then curvature, then start.
     pub fn runs(&self) -> Vec<RunSpec> {
         let c = &self.config;
+        let several_starts = c.start_offsets_x_m.len() > 1;
         let mut runs = Vec::new();
         for &terrain_model in &c.terrain_models {
             for &frequency_hz in &c.frequencies_hz {
                 for &curvature_per_r in &c.curvatures_per_r {
-                    runs.push(RunSpec {
-                        name: format!(
+                    for (start, &start_offset_x_m) in c.start_offsets_x_m.iter().enumerate() {
+                        let mut name = format!(
                             "k{}_f{}hz_{}",
                             number(curvature_per_r),
                             number(frequency_hz),
                             terrain_model.name()
-                        ),
-                        curvature_per_r,
-                        frequency_hz,
-                        terrain_model,
-                        measure_from_s: self.measure_from_s(frequency_hz),
-                        duration_s: self.run_duration_s(frequency_hz),
-                    });
+                        );
+                        if several_starts {
+                            name.push_str(&format!("_start{start}"));
+                        }
+                        runs.push(RunSpec {
+                            name,
+                            curvature_per_r,
+                            frequency_hz,
+                            terrain_model,
+                            start_offset_x_m,
+                            measure_from_s: self.measure_from_s(frequency_hz),
+                            duration_s: self.run_duration_s(frequency_hz),
+                        });
+                    }
                 }
             }
         }
@@ -336,11 +359,14 @@ impl Experiment {
 /// One run of the sweep.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RunSpec {
-    /// `k<curvature>_f<frequency>hz_<model>`, e.g. `k-0.5_f2hz_mpm`: names its bag folder.
+    /// `k<curvature>_f<frequency>hz_<model>`, e.g. `k-0.5_f2hz_mpm`, with `_start<i>` (the
+    /// index in `start_offsets_x_m`) when there are several starts: names its bag folder.
     pub name: String,
     pub curvature_per_r: f64,
     pub frequency_hz: f64,
     pub terrain_model: TerrainModel,
+    /// The robot's start along x from the base scene's (m).
+    pub start_offset_x_m: f64,
     /// Start of the measurement (s): [`Experiment::measure_from_s`].
     pub measure_from_s: f64,
     /// Simulated time (s).
@@ -383,6 +409,7 @@ mod tests {
         assert_eq!(c.frequencies_hz, [1.0, 2.0]);
         assert_eq!(c.terrain_models, [TerrainModel::Mpm, TerrainModel::Rft]);
         assert_eq!((c.settle_s, c.cycles), (0.5, 4));
+        assert_eq!(c.start_offsets_x_m, [0.0]);
         assert!((c.robot_total_mass_kg - 0.085).abs() < 1e-15);
         assert!(error("curvatures_per_r: [1]\n", &[]).contains("name"));
     }
@@ -391,7 +418,7 @@ mod tests {
     fn the_shipped_experiment_loads() {
         let e = Experiment::load(Path::new("config/experiments/leg_curvature.yaml"), &[]).unwrap();
         assert_eq!(e.config.name, "leg_curvature");
-        assert_eq!(e.runs().len(), 5 * 2 * 2);
+        assert_eq!(e.runs().len(), 5 * 3 * 2 * 3);
     }
 
     #[test]
@@ -432,11 +459,46 @@ mod tests {
         assert_eq!(zero.measure_from_s(1.0), 0.0);
         assert!((zero.run_duration_s(1.0) - 4.5).abs() < 1e-12);
         assert_eq!(number(-0.0), "0");
+        assert!(runs.iter().all(|r| r.start_offset_x_m == 0.0));
+    }
+
+    #[test]
+    fn each_start_repeats_every_run() {
+        let e = load(
+            "name: s\ncurvatures_per_r: [1]\nfrequencies_hz: [2, 4]\nterrain_models: [mpm]\n\
+             start_offsets_x_m: [0, 0.004]\n",
+            &[],
+        )
+        .unwrap();
+        let runs = e.runs();
+        let named: Vec<(&str, f64)> = runs
+            .iter()
+            .map(|r| (r.name.as_str(), r.start_offset_x_m))
+            .collect();
+        assert_eq!(
+            named,
+            [
+                ("k1_f2hz_mpm_start0", 0.0),
+                ("k1_f2hz_mpm_start1", 0.004),
+                ("k1_f4hz_mpm_start0", 0.0),
+                ("k1_f4hz_mpm_start1", 0.004),
+            ]
+        );
     }
 
     #[test]
     fn errors_name_the_file_and_the_field() {
-        let cases: [(&str, &[&str], &str); 14] = [
+        let cases: [(&str, &[&str], &str); 16] = [
+            (
+                "name: s\nstart_offsets_x_m: [0, .inf]\n",
+                &[],
+                "start_offsets_x_m.1: inf must be a finite number (m)",
+            ),
+            (
+                "name: s\nstart_offsets_x_m: [0.002, 0.002]\n",
+                &[],
+                "start_offsets_x_m.1: 0.002 is listed twice",
+            ),
             ("name: s\nspeed: 1\n", &[], "unknown field `speed`"),
             ("name: a/b\n", &[], "name:"),
             (

@@ -23,7 +23,10 @@ pub use config::{
     Experiment, ExperimentConfig, GaitWindow, RunSpec, TerrainModel, LEAD_CYCLES,
     WINDOW_EXTRA_CYCLES,
 };
-pub use results::{results_csv, write_results_csv, RunResult, CSV_COLUMNS, STATUS_OK};
+pub use results::{
+    results_csv, summarize, summary_csv, write_results_csv, CellSummary, RunResult, CSV_COLUMNS,
+    STATUS_OK, SUMMARY_COLUMNS, TURNED_OVER_TILT_DEG,
+};
 
 use crate::analysis::bag::{analyze_bag_with, AnalysisOptions};
 use crate::analysis::plots::PlotError;
@@ -37,6 +40,8 @@ pub const DEFAULT_OUT_PARENT: &str = "out/experiments";
 pub const RESULTS_CSV: &str = "results.csv";
 /// The results with the experiment's settings.
 pub const RESULTS_JSON: &str = "results.json";
+/// One row per cell of the sweep (model, frequency, curvature) over its starts.
+pub const SUMMARY_CSV: &str = "summary.csv";
 /// The generated robot of each curvature: `<out>/urdf/k<curvature>/hexapod.urdf`.
 pub const URDF_DIR: &str = "urdf";
 /// Each run's bag: `<out>/bags/<run name>/`.
@@ -99,6 +104,9 @@ pub struct ExperimentReport {
     pub threads: usize,
     /// One per run, in the order run.
     pub runs: Vec<RunResult>,
+    /// One per cell of the sweep (model, frequency, curvature) over its starts: `summary.csv`.
+    #[serde(default)]
+    pub cells: Vec<CellSummary>,
     /// Runs whose status is not `ok`.
     pub failed: usize,
     /// Wall time of the whole experiment (s).
@@ -147,6 +155,7 @@ pub fn run_experiment(
 
     let csv_path = out.join(RESULTS_CSV);
     let json_path = out.join(RESULTS_JSON);
+    let summary_path = out.join(SUMMARY_CSV);
     let mut kept = if opts.resume {
         finished_runs(&json_path, cfg)?
     } else {
@@ -171,12 +180,16 @@ pub fn run_experiment(
         started: chrono::Local::now().format("%Y-%m-%d %H:%M:%S").to_string(),
         threads: rayon::current_num_threads(),
         runs: Vec::with_capacity(runs.len()),
+        cells: Vec::new(),
         failed: 0,
         wall_time_s: 0.0,
         files: Vec::new(),
     };
-    let write_results = |report: &ExperimentReport| -> Result<(), ExperimentError> {
+    let write_results = |report: &mut ExperimentReport| -> Result<(), ExperimentError> {
         write_results_csv(&csv_path, &report.runs).map_err(write_error(&csv_path))?;
+        report.cells = summarize(&report.runs);
+        std::fs::write(&summary_path, summary_csv(&report.cells))
+            .map_err(write_error(&summary_path))?;
         let json = serde_json::to_string_pretty(report).expect("plain data");
         std::fs::write(&json_path, json + "\n").map_err(write_error(&json_path))
     };
@@ -214,18 +227,18 @@ pub fn run_experiment(
         report.failed += usize::from(!result.is_ok());
         report.runs.push(result);
         report.wall_time_s = wall.elapsed().as_secs_f64();
-        write_results(&report)?;
+        write_results(&mut report)?;
     }
     progress.done();
 
     let charts = write_speed_chart(&report.runs, &cfg.terrain_models, &cfg.frequencies_hz, &out)?;
-    report.files = [csv_path.clone(), json_path.clone()]
+    report.files = [csv_path.clone(), summary_path.clone(), json_path.clone()]
         .iter()
         .chain(&charts)
         .map(|p| p.display().to_string())
         .collect();
     report.wall_time_s = wall.elapsed().as_secs_f64();
-    write_results(&report)?;
+    write_results(&mut report)?;
     Ok(report)
 }
 
@@ -263,6 +276,7 @@ fn not_run(spec: &RunSpec, status: impl Into<String>) -> RunResult {
         curvature_per_r: spec.curvature_per_r,
         frequency_hz: spec.frequency_hz,
         terrain_model: spec.terrain_model.name().into(),
+        start_offset_x_m: spec.start_offset_x_m,
         status: status.into(),
         ..RunResult::default()
     }
@@ -275,10 +289,21 @@ fn yaml_scalar(value: &str) -> String {
         .unwrap_or_else(|_| value.to_string())
 }
 
-/// The base scene with the run's URDF, frequency and terrain model.
+/// The base scene with the run's URDF, frequency, terrain model and start.
 fn run_scene(experiment: &Experiment, spec: &RunSpec, urdf: &Path) -> Result<Scene, SceneError> {
     let cfg = &experiment.config;
     let mut overrides = cfg.overrides.clone();
+    if spec.start_offset_x_m != 0.0 {
+        let base = Scene::load(&cfg.base_scene, &overrides)?;
+        // `validate` checked that the base scene has a robot.
+        if let Some(robot) = &base.config.robot {
+            let [x, y] = robot.initial_pose.position_m;
+            overrides.push(format!(
+                "robot.initial_pose.position_m=[{}, {y}]",
+                x + spec.start_offset_x_m
+            ));
+        }
+    }
     overrides.push(format!(
         "robot.urdf={}",
         yaml_scalar(&urdf.display().to_string())

@@ -5,10 +5,11 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 /// The columns of `results.csv`, in order (`docs/experiment.md`).
-pub const CSV_COLUMNS: [&str; 13] = [
+pub const CSV_COLUMNS: [&str; 14] = [
     "curvature_per_r",
     "frequency_hz",
     "terrain_model",
+    "start_offset_x_m",
     "mean_speed_m_s",
     "speed_per_cycle_mean_m_s",
     "speed_per_cycle_std_m_s",
@@ -36,6 +37,9 @@ pub struct RunResult {
     pub frequency_hz: f64,
     /// `mpm` or `rft`.
     pub terrain_model: String,
+    /// The robot's start along x from the base scene's (m).
+    #[serde(default)]
+    pub start_offset_x_m: f64,
     /// Body displacement along x over the measured window (`cycles + 1/2` gait cycles from the
     /// measurement's start to the end of the run) over its duration (m/s).
     pub mean_speed_m_s: Option<f64>,
@@ -80,12 +84,12 @@ impl RunResult {
     }
 
     /// The CSV cells of this row, in [`CSV_COLUMNS`] order.
-    fn csv_cells(&self) -> [String; 13] {
-        let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v}"));
+    fn csv_cells(&self) -> [String; 14] {
         [
             format!("{}", self.curvature_per_r),
             format!("{}", self.frequency_hz),
             self.terrain_model.clone(),
+            format!("{}", self.start_offset_x_m),
             opt(self.mean_speed_m_s),
             opt(self.speed_per_cycle_mean_m_s),
             opt(self.speed_per_cycle_std_m_s),
@@ -98,6 +102,11 @@ impl RunResult {
             self.status.clone(),
         ]
     }
+}
+
+/// An optional number as a CSV cell: empty when absent.
+fn opt(value: Option<f64>) -> String {
+    value.map_or(String::new(), |v| format!("{v}"))
 }
 
 /// One CSV cell: quoted (with quotes doubled) when it holds a comma, a quote or a line break
@@ -130,6 +139,133 @@ pub(crate) fn csv_table(columns: &[&str], rows: impl IntoIterator<Item = Vec<Str
 /// Writes [`results_csv`] to `path`.
 pub fn write_results_csv(path: &Path, runs: &[RunResult]) -> std::io::Result<()> {
     std::fs::write(path, results_csv(runs))
+}
+
+/// The columns of `summary.csv`, in order (`docs/experiment.md`).
+pub const SUMMARY_COLUMNS: [&str; 11] = [
+    "curvature_per_r",
+    "frequency_hz",
+    "terrain_model",
+    "starts",
+    "completed",
+    "speed_mean_m_s",
+    "speed_std_m_s",
+    "speed_standard_error_m_s",
+    "sinkage_mean_m",
+    "max_tilt_deg",
+    "turned_over",
+];
+
+/// A tilt beyond this (deg) puts the body's up axis below the horizon: the robot is on its
+/// side or back.
+pub const TURNED_OVER_TILT_DEG: f64 = 90.0;
+
+/// One cell of the sweep (terrain model, frequency, curvature) over its starts.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct CellSummary {
+    /// Leg curvature (1/R).
+    pub curvature_per_r: f64,
+    /// Gait frequency (Hz).
+    pub frequency_hz: f64,
+    /// `mpm` or `rft`.
+    pub terrain_model: String,
+    /// Runs of the cell, one per start.
+    pub starts: usize,
+    /// Runs that went through and measured a speed.
+    pub completed: usize,
+    /// Mean over the completed runs of each run's mean per-cycle speed (m/s).
+    pub speed_mean_m_s: Option<f64>,
+    /// Their sample standard deviation over starts (m/s); absent below two runs.
+    pub speed_std_m_s: Option<f64>,
+    /// `speed_std_m_s / sqrt(completed)` (m/s): the noise of `speed_mean_m_s`.
+    pub speed_standard_error_m_s: Option<f64>,
+    /// Mean over the completed runs of each run's mean sinkage (m).
+    pub sinkage_mean_m: Option<f64>,
+    /// Largest tilt over the cell's runs (deg).
+    pub max_tilt_deg: Option<f64>,
+    /// Runs that tilted beyond [`TURNED_OVER_TILT_DEG`].
+    pub turned_over: usize,
+}
+
+impl CellSummary {
+    fn csv_cells(&self) -> Vec<String> {
+        vec![
+            format!("{}", self.curvature_per_r),
+            format!("{}", self.frequency_hz),
+            self.terrain_model.clone(),
+            self.starts.to_string(),
+            self.completed.to_string(),
+            opt(self.speed_mean_m_s),
+            opt(self.speed_std_m_s),
+            opt(self.speed_standard_error_m_s),
+            opt(self.sinkage_mean_m),
+            opt(self.max_tilt_deg),
+            self.turned_over.to_string(),
+        ]
+    }
+}
+
+/// Mean and sample standard deviation (absent below two values) of `values`.
+pub fn mean_and_sample_std(values: &[f64]) -> (Option<f64>, Option<f64>) {
+    let n = values.len() as f64;
+    if values.is_empty() {
+        return (None, None);
+    }
+    let mean = values.iter().sum::<f64>() / n;
+    let std = (values.len() > 1).then(|| {
+        let squares: f64 = values.iter().map(|v| (v - mean).powi(2)).sum();
+        (squares / (n - 1.0)).sqrt()
+    });
+    (Some(mean), std)
+}
+
+/// The runs grouped by cell (terrain model, frequency, curvature), in the order the cells first
+/// appear in `runs`.
+pub fn summarize(runs: &[RunResult]) -> Vec<CellSummary> {
+    let same_cell = |a: &RunResult, b: &CellSummary| {
+        a.terrain_model == b.terrain_model
+            && a.frequency_hz == b.frequency_hz
+            && a.curvature_per_r == b.curvature_per_r
+    };
+    let mut cells: Vec<CellSummary> = Vec::new();
+    for run in runs {
+        if !cells.iter().any(|c| same_cell(run, c)) {
+            cells.push(CellSummary {
+                curvature_per_r: run.curvature_per_r,
+                frequency_hz: run.frequency_hz,
+                terrain_model: run.terrain_model.clone(),
+                ..CellSummary::default()
+            });
+        }
+    }
+    for cell in &mut cells {
+        let members: Vec<&RunResult> = runs.iter().filter(|r| same_cell(r, cell)).collect();
+        let measured: Vec<&RunResult> = members
+            .iter()
+            .copied()
+            .filter(|r| r.is_ok() && r.speed_per_cycle_mean_m_s.is_some())
+            .collect();
+        let speeds: Vec<f64> = measured
+            .iter()
+            .filter_map(|r| r.speed_per_cycle_mean_m_s)
+            .collect();
+        let sinkages: Vec<f64> = measured.iter().filter_map(|r| r.sinkage_mean_m).collect();
+        let tilts = members.iter().filter_map(|r| r.max_tilt_deg);
+        cell.starts = members.len();
+        cell.completed = measured.len();
+        (cell.speed_mean_m_s, cell.speed_std_m_s) = mean_and_sample_std(&speeds);
+        cell.speed_standard_error_m_s =
+            cell.speed_std_m_s.map(|s| s / (speeds.len() as f64).sqrt());
+        cell.sinkage_mean_m = mean_and_sample_std(&sinkages).0;
+        cell.max_tilt_deg = tilts.clone().reduce(f64::max);
+        cell.turned_over = tilts.filter(|&t| t > TURNED_OVER_TILT_DEG).count();
+    }
+    cells
+}
+
+/// The text of `summary.csv`: a header of [`SUMMARY_COLUMNS`] and one line per cell.
+pub fn summary_csv(cells: &[CellSummary]) -> String {
+    csv_table(&SUMMARY_COLUMNS, cells.iter().map(CellSummary::csv_cells))
 }
 
 #[cfg(test)]
@@ -170,12 +306,12 @@ mod tests {
         assert_eq!(lines[0], CSV_COLUMNS.join(","));
         assert_eq!(
             lines[1],
-            "-0.5,2,mpm,0.125,0.12,0.01,4,,0.085,12.5,200,80,ok"
+            "-0.5,2,mpm,0,0.125,0.12,0.01,4,,0.085,12.5,200,80,ok"
         );
         // The failure's message is one quoted cell, quotes doubled, line break kept.
         assert_eq!(
             lines[2],
-            "1,1,rft,,,,,,,,,,\"--set terrain.model=rft: unknown field `terrain`, expected \"\"x\"\""
+            "1,1,rft,0,,,,,,,,,,\"--set terrain.model=rft: unknown field `terrain`, expected \"\"x\"\""
         );
         assert_eq!(lines[3], "more\"");
         assert_eq!(text.matches('\n').count(), 4);
@@ -198,5 +334,44 @@ mod tests {
             std::fs::read_to_string(&path).unwrap(),
             results_csv(&[row()])
         );
+    }
+
+    #[test]
+    fn cells_summarize_their_starts() {
+        let start = |k: f64, v: Option<f64>, tilt: f64, status: &str| RunResult {
+            curvature_per_r: k,
+            speed_per_cycle_mean_m_s: v,
+            sinkage_mean_m: v.map(|v| v / 10.0),
+            max_tilt_deg: Some(tilt),
+            status: status.into(),
+            ..row()
+        };
+        let runs = [
+            start(1.0, Some(0.1), 10.0, STATUS_OK),
+            start(-1.0, Some(0.0), 120.0, STATUS_OK),
+            start(1.0, Some(0.2), 20.0, STATUS_OK),
+            start(1.0, None, 95.0, "blew up"),
+            start(1.0, Some(0.3), 30.0, STATUS_OK),
+        ];
+        let cells = summarize(&runs);
+        assert_eq!(cells.len(), 2);
+        let c = &cells[0];
+        assert_eq!((c.curvature_per_r, c.starts, c.completed), (1.0, 4, 3));
+        assert!((c.speed_mean_m_s.unwrap() - 0.2).abs() < 1e-12);
+        // Sample standard deviation of 0.1, 0.2, 0.3 is 0.1; over sqrt(3) starts.
+        assert!((c.speed_std_m_s.unwrap() - 0.1).abs() < 1e-12);
+        assert!((c.speed_standard_error_m_s.unwrap() - 0.1 / 3f64.sqrt()).abs() < 1e-12);
+        assert!((c.sinkage_mean_m.unwrap() - 0.02).abs() < 1e-12);
+        // The failed run's tilt counts: it turned over before it failed.
+        assert_eq!((c.max_tilt_deg, c.turned_over), (Some(95.0), 1));
+        let single = &cells[1];
+        assert_eq!(
+            (single.starts, single.completed, single.turned_over),
+            (1, 1, 1)
+        );
+        assert_eq!(single.speed_std_m_s, None);
+        let text = summary_csv(&cells);
+        assert_eq!(text.lines().next().unwrap(), SUMMARY_COLUMNS.join(","));
+        assert_eq!(text.lines().nth(2).unwrap(), "-1,2,mpm,1,1,0,,,0,120,1");
     }
 }
