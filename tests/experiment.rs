@@ -23,7 +23,7 @@ const CSV_COLUMNS: [&str; 14] = [
     "curvature_per_r",
     "frequency_hz",
     "terrain_model",
-    "start_offset_x_m",
+    "start_x_m",
     "mean_speed_m_s",
     "speed_per_cycle_mean_m_s",
     "speed_per_cycle_std_m_s",
@@ -34,6 +34,20 @@ const CSV_COLUMNS: [&str; 14] = [
     "wall_time_s",
     "wall_time_per_sim_s",
     "status",
+];
+/// The columns `docs/experiment.md` documents for `summary.csv`.
+const SUMMARY_COLUMNS: [&str; 11] = [
+    "curvature_per_r",
+    "frequency_hz",
+    "terrain_model",
+    "starts",
+    "completed",
+    "speed_mean_m_s",
+    "speed_std_m_s",
+    "speed_standard_error_m_s",
+    "sinkage_mean_m",
+    "max_tilt_deg",
+    "turned_over",
 ];
 /// The sand bed of config/robot_on_sand.yaml (m): x and y extent.
 const BED_X_M: (f64, f64) = (-0.12, 0.8);
@@ -413,15 +427,15 @@ fn resume_keeps_finished_runs_and_runs_the_rest() {
 #[test]
 fn each_start_is_a_run_and_the_summary_pools_them() {
     // Two starts 1 cm apart on RFT ground, which is flat and the same everywhere: the robot
-    // walks the same walk shifted by the offset, and the summary has one cell of two starts.
+    // walks the same walk shifted by the spacing, and the summary has one cell of two starts.
     let tmp = tempfile::tempdir().unwrap();
     let file = tmp.path().join("starts.yaml");
-    let offset_m = 0.01;
+    let spacing_m = 0.01;
     std::fs::write(
         &file,
         format!(
             "name: starts\ncurvatures_per_r: [1]\nfrequencies_hz: [2]\nterrain_models: [rft]\n\
-             settle_s: 0\ncycles: 1\nstart_offsets_x_m: [0, {offset_m}]\n"
+             settle_s: 0\ncycles: 1\nstarts: 2\nstart_spacing_m: {spacing_m}\n"
         ),
     )
     .unwrap();
@@ -443,14 +457,15 @@ fn each_start_is_a_run_and_the_summary_pools_them() {
     let end_x = |r: &Value| r["final_position_m"][0].as_f64().unwrap();
     let shift_m = end_x(&runs[1]) - end_x(&runs[0]);
     assert!(
-        (shift_m - offset_m).abs() < 0.002,
-        "ends {} m apart, started {offset_m} m apart",
+        (shift_m - spacing_m).abs() < 0.002,
+        "ends {} m apart, started {spacing_m} m apart",
         shift_m
     );
-    assert_eq!(runs[1]["start_offset_x_m"], offset_m);
+    assert_eq!(runs[1]["start_x_m"], spacing_m);
     let summary = std::fs::read_to_string(out.join("summary.csv")).unwrap();
     let lines: Vec<&str> = summary.lines().collect();
     assert_eq!(lines.len(), 2, "{summary}");
+    assert_eq!(lines[0], SUMMARY_COLUMNS.join(","));
     assert!(lines[1].starts_with("1,2,rft,2,2,"), "{summary}");
     let cell = &v["cells"][0];
     let mean = (number(&runs[0], "speed_per_cycle_mean_m_s")

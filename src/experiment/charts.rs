@@ -27,9 +27,15 @@ const ERROR_CAP_HALF_WIDTH: f64 = 0.025;
 type Point = (f64, f64, f64);
 
 /// The points of one terrain model at one frequency, by curvature; failed runs are left out.
-/// A cell with several completed starts plots their mean and its standard deviation over the
-/// starts; a cell with one, that run's mean and the standard deviation of its cycles.
-fn points(runs: &[RunResult], model: TerrainModel, frequency_hz: f64) -> Vec<Point> {
+/// With `several_starts`, each cell's mean over its completed starts and their standard
+/// deviation (no bar below two); otherwise the run's mean per-cycle speed and the standard
+/// deviation of its cycles.
+fn points(
+    runs: &[RunResult],
+    model: TerrainModel,
+    frequency_hz: f64,
+    several_starts: bool,
+) -> Vec<Point> {
     let runs: Vec<RunResult> = runs
         .iter()
         .filter(|r| r.terrain_model == model.name() && r.frequency_hz == frequency_hz)
@@ -38,11 +44,12 @@ fn points(runs: &[RunResult], model: TerrainModel, frequency_hz: f64) -> Vec<Poi
     let mut points: Vec<Point> = summarize(&runs)
         .iter()
         .filter_map(|cell| {
-            let spread = if cell.completed > 1 {
+            let spread = if several_starts {
                 cell.speed_std_m_s
             } else {
                 runs.iter()
-                    .find(|r| r.curvature_per_r == cell.curvature_per_r && r.is_ok())
+                    .find(|r| r.curvature_per_r == cell.curvature_per_r)
+                    .filter(|r| r.is_ok())
                     .and_then(|r| r.speed_per_cycle_std_m_s)
             };
             Some((
@@ -112,46 +119,71 @@ fn draw<DB: DrawingBackend>(
     frequencies_hz: &[f64],
 ) -> Result<(), DrawError> {
     root.fill(&WHITE)?;
-    // One speed axis for all panels, 0 included.
-    let all: Vec<Point> = models
+    let several = several_starts(runs);
+    // One speed axis for all panels, every bar and start and 0 included.
+    let cells = models.iter().flat_map(|&m| {
+        frequencies_hz
+            .iter()
+            .flat_map(move |&f| points(runs, m, f, several))
+    });
+    let each_start = models
         .iter()
-        .flat_map(|&m| frequencies_hz.iter().flat_map(move |&f| points(runs, m, f)))
-        .collect();
+        .flat_map(|&m| frequencies_hz.iter().flat_map(move |&f| starts(runs, m, f)));
     let speed_range = padded_range(
-        all.iter()
-            .flat_map(|&(_, v, s)| [v - s, v + s])
+        cells
+            .flat_map(|(_, v, s)| [v - s, v + s])
+            .chain(each_start.map(|(_, v)| v))
             .chain([0.0]),
     );
     let panels = root.split_evenly((1, models.len().max(1)));
     for (panel, &model) in panels.iter().zip(models) {
-        draw_panel(panel, runs, model, frequencies_hz, speed_range.clone())?;
+        let layout = Panel {
+            model,
+            frequencies_hz,
+            several_starts: several,
+            speed_range: speed_range.clone(),
+        };
+        draw_panel(panel, runs, &layout)?;
     }
     Ok(root.present()?)
+}
+
+/// What one panel shows.
+struct Panel<'a> {
+    model: TerrainModel,
+    frequencies_hz: &'a [f64],
+    /// Whether cells pool several starts ([`points`]).
+    several_starts: bool,
+    speed_range: std::ops::Range<f64>,
 }
 
 fn draw_panel<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     runs: &[RunResult],
-    model: TerrainModel,
-    frequencies_hz: &[f64],
-    speed_range: std::ops::Range<f64>,
+    panel: &Panel,
 ) -> DrawResult<DB> {
+    let Panel {
+        model,
+        frequencies_hz,
+        several_starts,
+        ref speed_range,
+    } = *panel;
     let mut chart = chart(
         area,
         &format!("Speed vs leg curvature, {}", model.label()),
         -1.1..1.1,
-        speed_range,
+        speed_range.clone(),
         "leg curvature (1/R): -1 reversed, 0 straight, +1 C-leg",
         "speed along x, mean per gait cycle (m/s)",
     )?;
     let mut any = false;
-    let bars = if several_starts(runs) {
+    let bars = if several_starts {
         "mean over starts, bars: +-1 std over starts, dots: each start"
     } else {
         "bars: +-1 std of the cycles"
     };
     for (i, &f) in frequencies_hz.iter().enumerate() {
-        let pts = points(runs, model, f);
+        let pts = points(runs, model, f, several_starts);
         if pts.is_empty() {
             continue;
         }
@@ -168,7 +200,7 @@ fn draw_panel<DB: DrawingBackend>(
             pts.iter()
                 .map(|&(k, v, _)| Circle::new((k, v), MARKER_RADIUS_PX, color.filled())),
         )?;
-        if several_starts(runs) {
+        if several_starts {
             chart.draw_series(
                 starts(runs, model, f)
                     .into_iter()
@@ -226,7 +258,7 @@ mod tests {
             run(1.0, 1.0, "mpm", 0.1, true),
             run(1.0, 2.0, "rft", 0.0, false),
         ];
-        assert_eq!(points(&runs, TerrainModel::Mpm, 2.0).len(), 2);
+        assert_eq!(points(&runs, TerrainModel::Mpm, 2.0, false).len(), 2);
         let files = write_speed_chart(
             &runs,
             &[TerrainModel::Mpm, TerrainModel::Rft],
@@ -256,14 +288,29 @@ mod tests {
             ..RunResult::default()
         };
         let one = [start(0.3, 0.05)];
-        assert_eq!(points(&one, TerrainModel::Mpm, 4.0), [(1.0, 0.3, 0.05)]);
+        assert_eq!(
+            points(&one, TerrainModel::Mpm, 4.0, false),
+            [(1.0, 0.3, 0.05)]
+        );
         assert!(!several_starts(&one));
         let three = [start(0.3, 0.05), start(0.4, 0.05), start(0.5, 0.05)];
-        let p = points(&three, TerrainModel::Mpm, 4.0);
+        assert!(several_starts(&three));
+        let p = points(&three, TerrainModel::Mpm, 4.0, true);
         assert_eq!(p.len(), 1);
         assert!(
             (p[0].1 - 0.4).abs() < 1e-12 && (p[0].2 - 0.1).abs() < 1e-12,
             "{p:?}"
+        );
+        // Of several starts only one went through: its mean, and no bar (not its cycles').
+        let failed = RunResult {
+            status: "blew up".into(),
+            speed_per_cycle_mean_m_s: None,
+            ..start(0.0, 0.0)
+        };
+        let one_of_two = [start(0.3, 0.05), failed];
+        assert_eq!(
+            points(&one_of_two, TerrainModel::Mpm, 4.0, true),
+            [(1.0, 0.3, 0.0)]
         );
         assert_eq!(starts(&three, TerrainModel::Mpm, 4.0).len(), 3);
         let dir = tempfile::tempdir().unwrap();

@@ -64,12 +64,15 @@ pub struct ExperimentConfig {
     /// Terrain models (`mpm`, `rft`): the scene's `terrain.model`. Default [mpm, rft].
     #[serde(default = "default_terrain_models")]
     pub terrain_models: Vec<TerrainModel>,
-    /// Where the robot starts along x, as offsets from the base scene's
-    /// `robot.initial_pose.position_m[0]` (m): every run is repeated from each. The walk is
-    /// chaotic, so a speed from one start is not a measurement; a few millimetres apart give
-    /// independent walks. Default [0] (one start).
-    #[serde(default = "default_start_offsets_x_m")]
-    pub start_offsets_x_m: Vec<f64>,
+    /// Runs per cell (curvature, frequency, model), the robot started `start_spacing_m`
+    /// further along x each time from where the base scene (with `overrides`) starts it. The
+    /// walk is chaotic, so one run's speed is one sample; `summary.csv` pools the starts.
+    /// >= 1. Default 1.
+    #[serde(default = "default_starts")]
+    pub starts: u32,
+    /// x spacing of the starts (m), > 0. Default 0.002 (as `sandstep sweep`).
+    #[serde(default = "default_start_spacing_m")]
+    pub start_spacing_m: f64,
     /// Simulated time to settle before measuring (s), >= 0: the measured cycles are the first
     /// that start at or after it ([`Experiment::measure_from_s`]). Default 0.5.
     #[serde(default = "default_settle_s")]
@@ -145,8 +148,11 @@ fn default_frequencies() -> Vec<f64> {
 fn default_terrain_models() -> Vec<TerrainModel> {
     vec![TerrainModel::Mpm, TerrainModel::Rft]
 }
-fn default_start_offsets_x_m() -> Vec<f64> {
-    vec![0.0]
+fn default_starts() -> u32 {
+    1
+}
+fn default_start_spacing_m() -> f64 {
+    0.002
 }
 fn default_settle_s() -> f64 {
     0.5
@@ -163,6 +169,9 @@ fn default_total_mass_kg() -> f64 {
 pub struct Experiment {
     pub file: PathBuf,
     pub config: ExperimentConfig,
+    /// Where each start puts the robot along x (m): `starts` values `start_spacing_m` apart
+    /// from the base scene's start.
+    pub start_x_m: Vec<f64>,
 }
 
 impl Experiment {
@@ -188,11 +197,12 @@ impl Experiment {
                     YamlProblem::Override(e) => e.to_string(),
                 },
             })?;
-        let experiment = Experiment {
+        let mut experiment = Experiment {
             file: file.to_path_buf(),
             config,
+            start_x_m: Vec::new(),
         };
-        experiment.validate()?;
+        experiment.start_x_m = experiment.validate()?;
         Ok(experiment)
     }
 
@@ -205,10 +215,11 @@ impl Experiment {
         .into()
     }
 
-    /// Checks every value and that the base scene, with the common overrides, is a robot scene.
+    /// Checks every value, that the base scene with the common overrides is a robot scene, and
+    /// that every start loads with every terrain model; returns the starts' x (m).
     // Negated comparisons (`!(a <= b)`) on purpose: they reject NaN too.
     #[allow(clippy::neg_cmp_op_on_partial_ord)]
-    pub fn validate(&self) -> Result<(), ExperimentError> {
+    pub fn validate(&self) -> Result<Vec<f64>, ExperimentError> {
         let c = &self.config;
         check_output_name(&c.name).map_err(|e| self.invalid("name", e.to_string()))?;
         let list = |field: &str, values: &[f64], check: &dyn Fn(f64) -> bool, range: &str| {
@@ -241,12 +252,6 @@ impl Experiment {
             &|f| f > 0.0 && f.is_finite(),
             "a finite number > 0 (Hz)",
         )?;
-        list(
-            "start_offsets_x_m",
-            &c.start_offsets_x_m,
-            &|x| x.is_finite(),
-            "a finite number (m)",
-        )?;
         if c.terrain_models.is_empty() {
             return Err(self.invalid("terrain_models", "needs at least one of mpm, rft"));
         }
@@ -266,6 +271,15 @@ impl Experiment {
         }
         if c.cycles == 0 {
             return Err(self.invalid("cycles", "must be at least 1"));
+        }
+        if c.starts == 0 {
+            return Err(self.invalid("starts", "must be at least 1"));
+        }
+        if !(c.start_spacing_m > 0.0 && c.start_spacing_m.is_finite()) {
+            return Err(self.invalid(
+                "start_spacing_m",
+                format!("{} must be a finite number > 0 (m)", c.start_spacing_m),
+            ));
         }
         if !(c.robot_total_mass_kg > 0.0 && c.robot_total_mass_kg.is_finite()) {
             return Err(self.invalid(
@@ -289,13 +303,30 @@ impl Experiment {
             };
             self.invalid(field, e.to_string())
         })?;
-        if scene.config.robot.is_none() {
+        let Some(robot) = &scene.config.robot else {
             return Err(self.invalid(
                 "base_scene",
                 format!("{} has no `robot` section", c.base_scene.display()),
             ));
+        };
+        let x0 = robot.initial_pose.position_m[0];
+        let start_x_m: Vec<f64> = (0..c.starts)
+            .map(|k| x0 + f64::from(k) * c.start_spacing_m)
+            .collect();
+        // Each start must load with each model (an MPM robot must start over the sand).
+        for (i, &x) in start_x_m.iter().enumerate() {
+            for &model in &c.terrain_models {
+                let mut overrides = c.overrides.clone();
+                overrides.extend([start_override(x), model_override(model)]);
+                Scene::load(&c.base_scene, &overrides).map_err(|e| {
+                    self.invalid(
+                        "starts",
+                        format!("start {i} (x = {x} m, {}): {e}", model.name()),
+                    )
+                })?;
+            }
         }
-        Ok(())
+        Ok(start_x_m)
     }
 
     /// The robot with legs of `curvature_per_r` (units of 1/R): the published robot's legs
@@ -324,19 +355,18 @@ impl Experiment {
     /// Every run of the sweep: by terrain model, then frequency, then curvature, then start.
     pub fn runs(&self) -> Vec<RunSpec> {
         let c = &self.config;
-        let several_starts = c.start_offsets_x_m.len() > 1;
         let mut runs = Vec::new();
         for &terrain_model in &c.terrain_models {
             for &frequency_hz in &c.frequencies_hz {
                 for &curvature_per_r in &c.curvatures_per_r {
-                    for (start, &start_offset_x_m) in c.start_offsets_x_m.iter().enumerate() {
+                    for (start, &start_x_m) in self.start_x_m.iter().enumerate() {
                         let mut name = format!(
                             "k{}_f{}hz_{}",
                             number(curvature_per_r),
                             number(frequency_hz),
                             terrain_model.name()
                         );
-                        if several_starts {
+                        if self.start_x_m.len() > 1 {
                             name.push_str(&format!("_start{start}"));
                         }
                         runs.push(RunSpec {
@@ -344,7 +374,7 @@ impl Experiment {
                             curvature_per_r,
                             frequency_hz,
                             terrain_model,
-                            start_offset_x_m,
+                            start_x_m,
                             measure_from_s: self.measure_from_s(frequency_hz),
                             duration_s: self.run_duration_s(frequency_hz),
                         });
@@ -356,17 +386,27 @@ impl Experiment {
     }
 }
 
+/// The `--set` override that starts the robot at `x_m` along x.
+pub fn start_override(x_m: f64) -> String {
+    format!("robot.initial_pose.position_m.0={x_m}")
+}
+
+/// The `--set` override that selects `model`.
+pub fn model_override(model: TerrainModel) -> String {
+    format!("terrain.model={}", model.name())
+}
+
 /// One run of the sweep.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RunSpec {
-    /// `k<curvature>_f<frequency>hz_<model>`, e.g. `k-0.5_f2hz_mpm`, with `_start<i>` (the
-    /// index in `start_offsets_x_m`) when there are several starts: names its bag folder.
+    /// `k<curvature>_f<frequency>hz_<model>`, e.g. `k-0.5_f2hz_mpm`, with `_start<i>` (i from
+    /// 0) when there are several starts: names its bag folder.
     pub name: String,
     pub curvature_per_r: f64,
     pub frequency_hz: f64,
     pub terrain_model: TerrainModel,
-    /// The robot's start along x from the base scene's (m).
-    pub start_offset_x_m: f64,
+    /// Where the robot starts along x (m).
+    pub start_x_m: f64,
     /// Start of the measurement (s): [`Experiment::measure_from_s`].
     pub measure_from_s: f64,
     /// Simulated time (s).
@@ -409,7 +449,8 @@ mod tests {
         assert_eq!(c.frequencies_hz, [1.0, 2.0]);
         assert_eq!(c.terrain_models, [TerrainModel::Mpm, TerrainModel::Rft]);
         assert_eq!((c.settle_s, c.cycles), (0.5, 4));
-        assert_eq!(c.start_offsets_x_m, [0.0]);
+        assert_eq!((c.starts, c.start_spacing_m), (1, 0.002));
+        assert_eq!(e.start_x_m, [0.0]);
         assert!((c.robot_total_mass_kg - 0.085).abs() < 1e-15);
         assert!(error("curvatures_per_r: [1]\n", &[]).contains("name"));
     }
@@ -459,45 +500,48 @@ mod tests {
         assert_eq!(zero.measure_from_s(1.0), 0.0);
         assert!((zero.run_duration_s(1.0) - 4.5).abs() < 1e-12);
         assert_eq!(number(-0.0), "0");
-        assert!(runs.iter().all(|r| r.start_offset_x_m == 0.0));
+        assert!(runs.iter().all(|r| r.start_x_m == 0.0));
     }
 
     #[test]
     fn each_start_repeats_every_run() {
         let e = load(
             "name: s\ncurvatures_per_r: [1]\nfrequencies_hz: [2, 4]\nterrain_models: [mpm]\n\
-             start_offsets_x_m: [0, 0.004]\n",
+             starts: 2\nstart_spacing_m: 0.004\n\
+             overrides: [robot.initial_pose.position_m.0=0.05]\n",
             &[],
         )
         .unwrap();
         let runs = e.runs();
         let named: Vec<(&str, f64)> = runs
             .iter()
-            .map(|r| (r.name.as_str(), r.start_offset_x_m))
+            .map(|r| (r.name.as_str(), r.start_x_m))
             .collect();
         assert_eq!(
             named,
             [
-                ("k1_f2hz_mpm_start0", 0.0),
-                ("k1_f2hz_mpm_start1", 0.004),
-                ("k1_f4hz_mpm_start0", 0.0),
-                ("k1_f4hz_mpm_start1", 0.004),
+                ("k1_f2hz_mpm_start0", 0.05),
+                ("k1_f2hz_mpm_start1", 0.05 + 0.004),
+                ("k1_f4hz_mpm_start0", 0.05),
+                ("k1_f4hz_mpm_start1", 0.05 + 0.004),
             ]
         );
     }
 
     #[test]
     fn errors_name_the_file_and_the_field() {
-        let cases: [(&str, &[&str], &str); 16] = [
+        let cases: [(&str, &[&str], &str); 17] = [
+            ("name: s\nstarts: 0\n", &[], "starts: must be at least 1"),
             (
-                "name: s\nstart_offsets_x_m: [0, .inf]\n",
+                "name: s\nstart_spacing_m: 0\n",
                 &[],
-                "start_offsets_x_m.1: inf must be a finite number (m)",
+                "start_spacing_m: 0 must be a finite number > 0 (m)",
             ),
             (
-                "name: s\nstart_offsets_x_m: [0.002, 0.002]\n",
+                "name: s\nstarts: 3\nstart_spacing_m: 0.5\n",
                 &[],
-                "start_offsets_x_m.1: 0.002 is listed twice",
+                "starts: start 2 (x = 1 m, mpm): config/robot_on_sand.yaml: \
+                 robot.initial_pose.position_m[0]",
             ),
             ("name: s\nspeed: 1\n", &[], "unknown field `speed`"),
             ("name: a/b\n", &[], "name:"),

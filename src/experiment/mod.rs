@@ -2,9 +2,10 @@
 //! model (Li, Zhang and Goldman 2013; Hu et al. 2018, supplement section 4), `docs/experiment.md`.
 //!
 //! For each curvature the hexapod's URDF is generated at the same total mass; each run is the
-//! base scene with that URDF, frequency and terrain model, run and recorded like `sandstep run`
-//! ([`crate::ros::record_run`]); its bag is analysed after settling
-//! ([`crate::analysis::bag::analyze_bag_with`]). Results go to `results.csv`, `results.json`
+//! base scene with that URDF, frequency, terrain model and start, run and recorded like
+//! `sandstep run` ([`crate::ros::record_run`]); its bag is analysed after settling
+//! ([`crate::analysis::bag::analyze_bag_with`]). Results go to `results.csv` (a row per run),
+//! `summary.csv` (a row per curvature, frequency and model, pooling the starts), `results.json`
 //! and a chart; a failed run is recorded and the others go on.
 
 pub mod charts;
@@ -20,8 +21,8 @@ use serde::{Deserialize, Serialize};
 
 pub use charts::{write_speed_chart, SPEED_CHART};
 pub use config::{
-    Experiment, ExperimentConfig, GaitWindow, RunSpec, TerrainModel, LEAD_CYCLES,
-    WINDOW_EXTRA_CYCLES,
+    model_override, start_override, Experiment, ExperimentConfig, GaitWindow, RunSpec,
+    TerrainModel, LEAD_CYCLES, WINDOW_EXTRA_CYCLES,
 };
 pub use results::{
     results_csv, summarize, summary_csv, write_results_csv, CellSummary, RunResult, CSV_COLUMNS,
@@ -127,8 +128,9 @@ pub fn urdf_path(out: &Path, curvature_per_r: f64) -> PathBuf {
         .join("hexapod.urdf")
 }
 
-/// Runs every run of `experiment`, writing URDFs, bags, `results.csv`, `results.json` (after
-/// every run, so a crash keeps what was done) and the chart into the output folder.
+/// Runs every run of `experiment`, writing URDFs, bags, `results.csv`, `summary.csv`,
+/// `results.json` (after every run, so a crash keeps what was done) and the chart into the
+/// output folder.
 pub fn run_experiment(
     experiment: &Experiment,
     opts: &ExperimentOptions,
@@ -276,7 +278,7 @@ fn not_run(spec: &RunSpec, status: impl Into<String>) -> RunResult {
         curvature_per_r: spec.curvature_per_r,
         frequency_hz: spec.frequency_hz,
         terrain_model: spec.terrain_model.name().into(),
-        start_offset_x_m: spec.start_offset_x_m,
+        start_x_m: spec.start_x_m,
         status: status.into(),
         ..RunResult::default()
     }
@@ -293,23 +295,12 @@ fn yaml_scalar(value: &str) -> String {
 fn run_scene(experiment: &Experiment, spec: &RunSpec, urdf: &Path) -> Result<Scene, SceneError> {
     let cfg = &experiment.config;
     let mut overrides = cfg.overrides.clone();
-    if spec.start_offset_x_m != 0.0 {
-        let base = Scene::load(&cfg.base_scene, &overrides)?;
-        // `validate` checked that the base scene has a robot.
-        if let Some(robot) = &base.config.robot {
-            let [x, y] = robot.initial_pose.position_m;
-            overrides.push(format!(
-                "robot.initial_pose.position_m=[{}, {y}]",
-                x + spec.start_offset_x_m
-            ));
-        }
-    }
-    overrides.push(format!(
-        "robot.urdf={}",
-        yaml_scalar(&urdf.display().to_string())
-    ));
-    overrides.push(format!("robot.gait.frequency_hz={}", spec.frequency_hz));
-    overrides.push(format!("terrain.model={}", spec.terrain_model.name()));
+    overrides.extend([
+        format!("robot.urdf={}", yaml_scalar(&urdf.display().to_string())),
+        format!("robot.gait.frequency_hz={}", spec.frequency_hz),
+        model_override(spec.terrain_model),
+        start_override(spec.start_x_m),
+    ]);
     Scene::load(&cfg.base_scene, &overrides)
 }
 
@@ -455,10 +446,11 @@ pub fn report_table(report: &ExperimentReport) -> String {
         report.out_dir
     );
     text.push_str(&format!(
-        "{:>6} {:>5} {:>4} {:>9} {:>17} {:>6} {:>8} {:>9} {:>6} {:>7}  status\n",
+        "{:>6} {:>5} {:>4} {:>8} {:>9} {:>17} {:>6} {:>8} {:>9} {:>6} {:>7}  status\n",
         "k(1/R)",
         "f Hz",
         "model",
+        "start mm",
         "mean m/s",
         "per cycle m/s",
         "cycles",
@@ -473,10 +465,11 @@ pub fn report_table(report: &ExperimentReport) -> String {
             _ => "-".into(),
         };
         text.push_str(&format!(
-            "{:>6} {:>5} {:>4} {:>9} {:>17} {:>6} {:>8} {:>9} {:>6} {:>7}  {}\n",
+            "{:>6} {:>5} {:>4} {:>8.1} {:>9} {:>17} {:>6} {:>8} {:>9} {:>6} {:>7}  {}\n",
             config::number(r.curvature_per_r),
             config::number(r.frequency_hz),
             r.terrain_model,
+            r.start_x_m * 1e3,
             fmt_opt(r.mean_speed_m_s, 4),
             per_cycle,
             r.cycles.map_or("-".into(), |n| n.to_string()),
@@ -487,6 +480,42 @@ pub fn report_table(report: &ExperimentReport) -> String {
                 .map_or("-".into(), |w| format!("{w:.2}")),
             r.status
         ));
+    }
+    if report.cells.iter().any(|c| c.starts > 1) {
+        text.push_str(&format!(
+            "\nover starts ({}):\n{:>6} {:>5} {:>4} {:>11} {:>26} {:>8} {:>8} {:>6}\n",
+            SUMMARY_CSV,
+            "k(1/R)",
+            "f Hz",
+            "model",
+            "completed",
+            "speed m/s (std, std err)",
+            "sink mm",
+            "max tilt",
+            "over"
+        ));
+        for c in &report.cells {
+            let speed = match (
+                c.speed_mean_m_s,
+                c.speed_std_m_s,
+                c.speed_standard_error_m_s,
+            ) {
+                (Some(m), Some(s), Some(e)) => format!("{m:.4} ({s:.4}, {e:.4})"),
+                (Some(m), ..) => format!("{m:.4}"),
+                _ => "-".into(),
+            };
+            text.push_str(&format!(
+                "{:>6} {:>5} {:>4} {:>11} {:>26} {:>8} {:>8} {:>6}\n",
+                config::number(c.curvature_per_r),
+                config::number(c.frequency_hz),
+                c.terrain_model,
+                format!("{} of {}", c.completed, c.starts),
+                speed,
+                fmt_opt(c.sinkage_mean_m.map(|s| s * 1e3), 1),
+                fmt_opt(c.max_tilt_deg, 0),
+                c.turned_over
+            ));
+        }
     }
     text
 }

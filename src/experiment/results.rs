@@ -4,12 +4,14 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
+use crate::analysis::bag::mean_and_sample_std;
+
 /// The columns of `results.csv`, in order (`docs/experiment.md`).
 pub const CSV_COLUMNS: [&str; 14] = [
     "curvature_per_r",
     "frequency_hz",
     "terrain_model",
-    "start_offset_x_m",
+    "start_x_m",
     "mean_speed_m_s",
     "speed_per_cycle_mean_m_s",
     "speed_per_cycle_std_m_s",
@@ -29,7 +31,8 @@ pub const STATUS_OK: &str = "ok";
 /// `None`: empty in the CSV, `null` in the JSON.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct RunResult {
-    /// The run's name (`k<curvature>_f<frequency>hz_<model>`), its bag's folder name.
+    /// The run's name (`k<curvature>_f<frequency>hz_<model>`, with `_start<i>` when there
+    /// are several starts), its bag's folder name.
     pub run: String,
     /// Leg curvature (1/R).
     pub curvature_per_r: f64,
@@ -37,9 +40,9 @@ pub struct RunResult {
     pub frequency_hz: f64,
     /// `mpm` or `rft`.
     pub terrain_model: String,
-    /// The robot's start along x from the base scene's (m).
+    /// Where the robot started along x (m).
     #[serde(default)]
-    pub start_offset_x_m: f64,
+    pub start_x_m: f64,
     /// Body displacement along x over the measured window (`cycles + 1/2` gait cycles from the
     /// measurement's start to the end of the run) over its duration (m/s).
     pub mean_speed_m_s: Option<f64>,
@@ -89,7 +92,7 @@ impl RunResult {
             format!("{}", self.curvature_per_r),
             format!("{}", self.frequency_hz),
             self.terrain_model.clone(),
-            format!("{}", self.start_offset_x_m),
+            format!("{}", self.start_x_m),
             opt(self.mean_speed_m_s),
             opt(self.speed_per_cycle_mean_m_s),
             opt(self.speed_per_cycle_std_m_s),
@@ -175,7 +178,7 @@ pub struct CellSummary {
     pub completed: usize,
     /// Mean over the completed runs of each run's mean per-cycle speed (m/s).
     pub speed_mean_m_s: Option<f64>,
-    /// Their sample standard deviation over starts (m/s); absent below two runs.
+    /// Their sample standard deviation over starts (m/s); absent below two completed runs.
     pub speed_std_m_s: Option<f64>,
     /// `speed_std_m_s / sqrt(completed)` (m/s): the noise of `speed_mean_m_s`.
     pub speed_standard_error_m_s: Option<f64>,
@@ -188,8 +191,8 @@ pub struct CellSummary {
 }
 
 impl CellSummary {
-    fn csv_cells(&self) -> Vec<String> {
-        vec![
+    fn csv_cells(&self) -> [String; 11] {
+        [
             format!("{}", self.curvature_per_r),
             format!("{}", self.frequency_hz),
             self.terrain_model.clone(),
@@ -203,20 +206,6 @@ impl CellSummary {
             self.turned_over.to_string(),
         ]
     }
-}
-
-/// Mean and sample standard deviation (absent below two values) of `values`.
-pub fn mean_and_sample_std(values: &[f64]) -> (Option<f64>, Option<f64>) {
-    let n = values.len() as f64;
-    if values.is_empty() {
-        return (None, None);
-    }
-    let mean = values.iter().sum::<f64>() / n;
-    let std = (values.len() > 1).then(|| {
-        let squares: f64 = values.iter().map(|v| (v - mean).powi(2)).sum();
-        (squares / (n - 1.0)).sqrt()
-    });
-    (Some(mean), std)
 }
 
 /// The runs grouped by cell (terrain model, frequency, curvature), in the order the cells first
@@ -253,10 +242,12 @@ pub fn summarize(runs: &[RunResult]) -> Vec<CellSummary> {
         let tilts = members.iter().filter_map(|r| r.max_tilt_deg);
         cell.starts = members.len();
         cell.completed = measured.len();
-        (cell.speed_mean_m_s, cell.speed_std_m_s) = mean_and_sample_std(&speeds);
+        let speed = mean_and_sample_std(&speeds);
+        cell.speed_mean_m_s = speed.map(|(mean, _)| mean);
+        cell.speed_std_m_s = speed.and_then(|(_, std)| std);
         cell.speed_standard_error_m_s =
             cell.speed_std_m_s.map(|s| s / (speeds.len() as f64).sqrt());
-        cell.sinkage_mean_m = mean_and_sample_std(&sinkages).0;
+        cell.sinkage_mean_m = mean_and_sample_std(&sinkages).map(|(mean, _)| mean);
         cell.max_tilt_deg = tilts.clone().reduce(f64::max);
         cell.turned_over = tilts.filter(|&t| t > TURNED_OVER_TILT_DEG).count();
     }
@@ -265,7 +256,10 @@ pub fn summarize(runs: &[RunResult]) -> Vec<CellSummary> {
 
 /// The text of `summary.csv`: a header of [`SUMMARY_COLUMNS`] and one line per cell.
 pub fn summary_csv(cells: &[CellSummary]) -> String {
-    csv_table(&SUMMARY_COLUMNS, cells.iter().map(CellSummary::csv_cells))
+    csv_table(
+        &SUMMARY_COLUMNS,
+        cells.iter().map(|c| c.csv_cells().to_vec()),
+    )
 }
 
 #[cfg(test)]

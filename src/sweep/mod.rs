@@ -22,6 +22,7 @@ use serde::{Deserialize, Serialize};
 
 pub use config::{Quantity, Setting, Sweep, SweepConfig};
 
+use crate::analysis::bag::mean_and_sample_std;
 use crate::analysis::plots::PlotError;
 use crate::experiment::config::GaitWindow;
 use crate::experiment::results::csv_table;
@@ -417,15 +418,6 @@ impl Measure<'_> {
     }
 }
 
-/// Mean and sample standard deviation (None for fewer than two values).
-fn mean_and_std(values: &[f64]) -> (f64, Option<f64>) {
-    let n = values.len() as f64;
-    let mean = values.iter().sum::<f64>() / n;
-    let std = (values.len() > 1)
-        .then(|| (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt());
-    (mean, std)
-}
-
 /// Runs and measures one setting, once per start; failures become its status.
 fn run_setting(
     sweep: &Sweep,
@@ -503,7 +495,7 @@ fn run_setting(
             }
         }
     }
-    let (mean, std) = mean_and_std(&values);
+    let (mean, std) = mean_and_sample_std(&values).expect("one value per run, at least one run");
     result.value = Some(mean);
     result.value_std = std;
     result.start_values = values;

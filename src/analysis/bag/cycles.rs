@@ -110,10 +110,31 @@ pub fn mean_and_std(values: &[f64]) -> Option<(f64, f64)> {
     Some((mean, variance.sqrt()))
 }
 
+/// Mean and sample standard deviation (`n - 1` in the denominator; `None` below two values)
+/// of values drawn independently, such as a quantity over starts; `None` for no values.
+pub fn mean_and_sample_std(values: &[f64]) -> Option<(f64, Option<f64>)> {
+    let (mean, _) = mean_and_std(values)?;
+    let n = values.len() as f64;
+    let squares = || values.iter().map(|v| (v - mean).powi(2)).sum::<f64>();
+    Some((
+        mean,
+        (values.len() > 1).then(|| (squares() / (n - 1.0)).sqrt()),
+    ))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use nalgebra::Isometry3;
+
+    #[test]
+    fn sample_std_divides_by_n_minus_one() {
+        let (mean, std) = mean_and_sample_std(&[0.1, 0.2, 0.3]).unwrap();
+        assert!((mean - 0.2).abs() < 1e-15);
+        assert!((std.unwrap() - 0.1).abs() < 1e-15);
+        assert_eq!(mean_and_sample_std(&[0.5]), Some((0.5, None)));
+        assert_eq!(mean_and_sample_std(&[]), None);
+    }
 
     fn turning(frequency_hz: f64, duration_s: f64, rate_hz: f64) -> Vec<(f64, f64)> {
         let n = (duration_s * rate_hz).round() as usize;

@@ -21,7 +21,7 @@ use serde::Serialize;
 use crate::bag::{BagError, BagReader, TopicInfo};
 use crate::msgs::{self, MessageType, RosMessage, Time};
 
-pub use cycles::{cycle_boundaries, GaitCycle};
+pub use cycles::{cycle_boundaries, mean_and_sample_std, GaitCycle};
 
 use tf::{pose_at, pose_to_isometry, sort_samples, transform_to_isometry, TfTree, TimedPose};
 
