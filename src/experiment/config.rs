@@ -309,10 +309,11 @@ impl Experiment {
                 format!("{} has no `robot` section", c.base_scene.display()),
             ));
         };
-        let x0 = robot.initial_pose.position_m[0];
-        let start_x_m: Vec<f64> = (0..c.starts)
-            .map(|k| x0 + f64::from(k) * c.start_spacing_m)
-            .collect();
+        let start_x_m = start_positions_m(
+            robot.initial_pose.position_m[0],
+            c.starts,
+            c.start_spacing_m,
+        );
         // Each start must load with each model (an MPM robot must start over the sand).
         for (i, &x) in start_x_m.iter().enumerate() {
             for &model in &c.terrain_models {
@@ -384,6 +385,14 @@ impl Experiment {
         }
         runs
     }
+}
+
+/// Where `starts` runs start along x (m): `spacing_m` apart from `x0_m`. Shared with
+/// `sandstep sweep`.
+pub fn start_positions_m(x0_m: f64, starts: u32, spacing_m: f64) -> Vec<f64> {
+    (0..starts)
+        .map(|k| x0_m + f64::from(k) * spacing_m)
+        .collect()
 }
 
 /// The `--set` override that starts the robot at `x_m` along x.

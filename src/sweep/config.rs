@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use super::SweepError;
 use crate::config_error::ConfigError;
-use crate::experiment::config::{check_output_name, GaitWindow};
+use crate::experiment::config::{check_output_name, start_override, start_positions_m, GaitWindow};
 use crate::scene::overrides::{deserialize_with_overrides, YamlProblem};
 use crate::scene::Scene;
 
@@ -275,7 +275,7 @@ impl Sweep {
         let study = &self.config.studies[setting.study];
         let start = run
             .and_then(|r| setting.start_x_m.get(r))
-            .map(|x| format!("robot.initial_pose.position_m.0={x}"));
+            .map(|&x| start_override(x));
         let overrides: Vec<String> = study
             .overrides
             .iter()
@@ -425,10 +425,11 @@ impl Sweep {
                         );
                         setting.duration_s = window.until_s;
                         setting.window = Some(window);
-                        let x0 = robot.initial_pose.position_m[0];
-                        setting.start_x_m = (0..study.starts)
-                            .map(|k| x0 + k as f64 * study.start_spacing_m)
-                            .collect();
+                        setting.start_x_m = start_positions_m(
+                            robot.initial_pose.position_m[0],
+                            study.starts,
+                            study.start_spacing_m,
+                        );
                     }
                     Quantity::CollapseRunout => {
                         if scene.config.column_collapse.is_none() || scene.sand().is_none() {
