@@ -33,6 +33,9 @@ const HIP_Z_M: f64 = -0.01;
 const LEG_SIZE_M: [f64; 3] = [0.004, 0.01, 0.04];
 /// Sand force magnitude scale of leg i: (i + 1) times this (N).
 const FORCE_SCALE_N: f64 = 0.1;
+/// The sand's force on the body in the synthetic bag (N, base_link frame, which stays level):
+/// drag backwards, support upwards.
+const BODY_FORCE_N: [f64; 3] = [-0.2, 0.0, 0.5];
 /// Surface cloud rate (Hz).
 const SURFACE_RATE_HZ: f64 = 2.0;
 /// Wall-clock log times of the "other tool" bag start here (ns since the epoch).
@@ -278,6 +281,17 @@ fn write_bag(dir: &Path, spec: BagSpec) -> BTreeMap<String, u64> {
                     }
                 );
             }
+            write!(
+                "/body_wrench",
+                t,
+                &WrenchStamped {
+                    header: header(t, "base_link"),
+                    wrench: Wrench {
+                        force: BODY_FORCE_N.into(),
+                        torque: [0.0; 3].into(),
+                    },
+                }
+            );
             if k % (RATE_HZ / SURFACE_RATE_HZ) as usize == 0 {
                 let points: Vec<[f32; 3]> = (0..20)
                     .flat_map(|i| (0..10).map(move |j| [0.01 * i as f32, 0.01 * j as f32, 0.0]))
@@ -428,6 +442,20 @@ fn walking_bag_summary_matches_the_motion() {
             1e-9,
         );
     }
+    let body = s.body_force.as_ref().expect("the body's force");
+    assert_eq!(
+        (body.topic.as_str(), body.samples),
+        ("/body_wrench", SAMPLES)
+    );
+    let magnitude = BODY_FORCE_N.iter().map(|f| f * f).sum::<f64>().sqrt();
+    assert_near("body mean force", body.mean_force_n, magnitude, 1e-9);
+    assert_near("body peak force", body.peak_force_n, magnitude, 1e-9);
+    assert_near(
+        "body mean vertical force",
+        body.mean_vertical_force_n.unwrap(),
+        BODY_FORCE_N[2],
+        1e-9,
+    );
 
     // Commands.
     let gait = &s.commands["/gait/frequency"];
@@ -499,6 +527,7 @@ fn rigid_ground_bag_has_no_sinkage_or_forces_and_skips_that_plot() {
         (None, None, None)
     );
     assert!(s.leg_forces.is_empty());
+    assert!(s.body_force.is_none());
     assert!(
         s.notes.iter().any(|n| n.contains("/sand/surface")),
         "{:?}",
@@ -623,6 +652,7 @@ fn cli_prints_json_and_writes_plots() {
         "sinkage_mean_m",
         "sinkage_max_m",
         "leg_forces",
+        "body_force",
         "commands",
         "topics",
     ] {

@@ -225,6 +225,7 @@ fn sigint_mid_run_leaves_a_bag_every_reader_opens() {
         "/tf_static",
         "/robot_description",
         "/body_pose",
+        "/body_wrench",
         "/leg_wrenches/leg_front_left",
         "/leg_wrenches/leg_rear_right",
         "/sand/surface",

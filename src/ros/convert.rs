@@ -9,7 +9,7 @@ use crate::msgs::{
     WrenchStamped,
 };
 use crate::robot::RobotState;
-use crate::scene::{LegWrench, LinkPose};
+use crate::scene::{LinkPose, LinkWrench};
 
 /// The world-fixed frame of REP-105; the simulator's odometry is ground truth in it.
 pub const ODOM_FRAME: &str = "odom";
@@ -129,8 +129,8 @@ pub fn tf_static(stamp: Time) -> TFMessage {
     .into()
 }
 
-/// The sand's wrench on one leg, in the leg link's frame.
-pub fn leg_wrench(stamp: Time, wrench: &LegWrench) -> WrenchStamped {
+/// The terrain's wrench on one link (a leg, the body), in the link's frame.
+pub fn link_wrench(stamp: Time, wrench: &LinkWrench) -> WrenchStamped {
     WrenchStamped {
         header: Header::new(stamp, &wrench.link),
         wrench: Wrench {

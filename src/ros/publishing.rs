@@ -24,6 +24,7 @@ pub const ODOM_TOPIC: &str = "odom";
 pub const BODY_POSE_TOPIC: &str = "body_pose";
 pub const ROBOT_DESCRIPTION_TOPIC: &str = "robot_description";
 pub const LEG_WRENCHES_TOPIC: &str = "leg_wrenches";
+pub const BODY_WRENCH_TOPIC: &str = "body_wrench";
 pub const SAND_SURFACE_TOPIC: &str = "sand/surface";
 
 /// `name` resolved in `namespace` (absolute names stay as they are).
@@ -103,6 +104,8 @@ struct Topics {
     tf: Topic<TFMessage>,
     tf_static: Topic<TFMessage>,
     robot_description: Topic<StringMsg>,
+    /// The terrain's wrench on the body; `None` on rigid ground or without a robot.
+    body_wrench: Option<Topic<WrenchStamped>>,
     leg_wrenches: Vec<Topic<WrenchStamped>>,
     sand_surface: Topic<PointCloud2>,
 }
@@ -152,7 +155,9 @@ impl Publishing {
             .map(|l| l.link)
             .collect();
         let mut leg_wrenches = Vec::new();
-        if sim.has_leg_wrenches() {
+        let mut body_wrench = None;
+        if sim.has_terrain_wrenches() {
+            body_wrench = Some(make!(BODY_WRENCH_TOPIC, Durability::Volatile));
             for link in &leg_links {
                 leg_wrenches.push(make!(
                     &format!("{LEG_WRENCHES_TOPIC}/{link}"),
@@ -168,6 +173,7 @@ impl Publishing {
             tf: make!(TF_TOPIC, Durability::Volatile),
             tf_static: make!(TF_STATIC_TOPIC, Durability::TransientLocal),
             robot_description: make!(ROBOT_DESCRIPTION_TOPIC, Durability::TransientLocal),
+            body_wrench,
             leg_wrenches,
             sand_surface: make!(SAND_SURFACE_TOPIC, Durability::Volatile),
         };
@@ -316,13 +322,21 @@ impl Publishing {
             stamp,
             convert::tf(stamp, &sim.link_poses()),
         )?;
-        if let Some(wrenches) = sim.take_leg_wrenches() {
-            for (topic, wrench) in t.leg_wrenches.iter().zip(&wrenches) {
+        if let Some(wrenches) = sim.take_terrain_wrenches() {
+            if let Some(topic) = &t.body_wrench {
                 Self::emit(
                     &mut self.bag,
                     topic,
                     stamp,
-                    convert::leg_wrench(stamp, wrench),
+                    convert::link_wrench(stamp, &wrenches.body),
+                )?;
+            }
+            for (topic, wrench) in t.leg_wrenches.iter().zip(&wrenches.legs) {
+                Self::emit(
+                    &mut self.bag,
+                    topic,
+                    stamp,
+                    convert::link_wrench(stamp, wrench),
                 )?;
             }
         }

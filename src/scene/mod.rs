@@ -24,7 +24,7 @@ pub use run::{
     build_simulation, run_scene, run_scene_observed, run_simulation_observed, NoObserver, Observer,
     RunOptions, RunSummary,
 };
-pub use simulation::{LegWrench, LinkPose, Simulation, Terrain};
+pub use simulation::{LinkPose, LinkWrench, Simulation, Terrain, TerrainWrenches};
 
 /// A scene that cannot be loaded or built; names the file and the field.
 #[derive(thiserror::Error, Debug)]

@@ -44,6 +44,8 @@ pub const SAND_SURFACE_TOPIC: &str = "/sand/surface";
 /// Prefix of the per-leg sand wrench topics, followed by the leg link name
 /// (`geometry_msgs/msg/WrenchStamped`).
 pub const LEG_WRENCHES_PREFIX: &str = "/leg_wrenches/";
+/// The terrain's wrench on the body (`geometry_msgs/WrenchStamped`).
+pub const BODY_WRENCH_TOPIC: &str = "/body_wrench";
 /// Gait frequency command (Hz, sign = direction; `std_msgs/msg/Float64`).
 pub const GAIT_FREQUENCY_TOPIC: &str = "/gait/frequency";
 /// Body velocity command (`geometry_msgs/msg/Twist`).
@@ -72,6 +74,7 @@ fn expected_type(topic: &str) -> Option<&'static MessageType> {
         GAIT_FREQUENCY_TOPIC => &msgs::FLOAT64,
         CMD_VEL_TOPIC => &msgs::TWIST,
         LEG_VELOCITY_COMMANDS_TOPIC => &msgs::FLOAT64_MULTI_ARRAY,
+        BODY_WRENCH_TOPIC => &msgs::WRENCH_STAMPED,
         _ if topic.starts_with(LEG_WRENCHES_PREFIX) => &msgs::WRENCH_STAMPED,
         _ => return None,
     })
@@ -155,9 +158,10 @@ impl From<&TopicInfo> for TopicSummary {
     }
 }
 
-/// The force of the sand on one leg, from its `/leg_wrenches/<leg>` topic.
+/// The force of the sand on one link: a leg, from its `/leg_wrenches/<leg>` topic, or the body,
+/// from `/body_wrench`.
 #[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct LegForceSummary {
+pub struct LinkForceSummary {
     /// The wrench topic.
     pub topic: String,
     /// Wrench messages.
@@ -166,7 +170,7 @@ pub struct LegForceSummary {
     pub mean_force_n: f64,
     /// Largest |F| (N).
     pub peak_force_n: f64,
-    /// Mean of the force's vertical (odom z, up positive) component (N); `None` when the leg
+    /// Mean of the force's vertical (odom z, up positive) component (N); `None` when the
     /// link's orientation cannot be found from `/tf` and the body pose.
     pub mean_vertical_force_n: Option<f64>,
 }
@@ -225,7 +229,10 @@ pub struct BagSummary {
     /// Largest such depth (m).
     pub sinkage_max_m: Option<f64>,
     /// Sand force on each leg, by leg link name.
-    pub leg_forces: BTreeMap<String, LegForceSummary>,
+    pub leg_forces: BTreeMap<String, LinkForceSummary>,
+    /// Sand force on the body (its belly and sides); `None` without `/body_wrench`. With the
+    /// legs' it carries the robot's weight on average.
+    pub body_force: Option<LinkForceSummary>,
     /// Commands received, by topic.
     pub commands: BTreeMap<String, CommandSummary>,
     /// Every topic of the bag, sorted by name.
@@ -577,7 +584,7 @@ pub fn analyze_bag_with(path: &Path, opts: &AnalysisOptions) -> Result<BagAnalys
         };
         let wrenches = read_optional::<msgs::WrenchStamped>(&reader, topic)?;
         if let Some((force_summary, force_series)) =
-            leg_forces(topic, leg, &wrenches, &time, &body, start_s)
+            link_forces(topic, leg, &wrenches, &time, &body, start_s)
         {
             summary.leg_forces.insert(leg.to_string(), force_summary);
             series.leg_forces.push(force_series);
@@ -585,6 +592,19 @@ pub fn analyze_bag_with(path: &Path, opts: &AnalysisOptions) -> Result<BagAnalys
     }
     if summary.leg_forces.is_empty() {
         notes.push(format!("leg forces: no {LEG_WRENCHES_PREFIX}* messages"));
+    }
+    let body_wrenches = read_optional::<msgs::WrenchStamped>(&reader, BODY_WRENCH_TOPIC)?;
+    summary.body_force = link_forces(
+        BODY_WRENCH_TOPIC,
+        &body.body_frame,
+        &body_wrenches,
+        &time,
+        &body,
+        start_s,
+    )
+    .map(|(force_summary, _)| force_summary);
+    if summary.body_force.is_none() && !summary.leg_forces.is_empty() {
+        notes.push(format!("body force: no {BODY_WRENCH_TOPIC} messages"));
     }
     sinkage_summary(&reader, &body, start_s, &mut summary, &mut notes)?;
 
@@ -680,6 +700,7 @@ fn pose_summary(path: &Path, source: &str, pose: &[TimedPose]) -> BagSummary {
         sinkage_mean_m: None,
         sinkage_max_m: None,
         leg_forces: BTreeMap::new(),
+        body_force: None,
         commands: BTreeMap::new(),
         topics: Vec::new(),
         plots: Vec::new(),
@@ -716,16 +737,16 @@ fn joint_angle_series(
     series
 }
 
-/// Force statistics from `start_s` on and the whole |F| series of one leg; `None` without
-/// messages in the window.
-fn leg_forces(
+/// Force statistics from `start_s` on and the whole |F| series of one link (a leg, the body);
+/// `None` without messages in the window. `link` is the frame of messages that name none.
+fn link_forces(
     topic: &str,
-    leg: &str,
+    link: &str,
     wrenches: &[(u64, msgs::WrenchStamped)],
     time: &TimeBase,
     body: &BodyTrack,
     start_s: f64,
-) -> Option<(LegForceSummary, NamedSeries)> {
+) -> Option<(LinkForceSummary, NamedSeries)> {
     let mut points = Vec::with_capacity(wrenches.len());
     let mut magnitudes = Vec::with_capacity(wrenches.len());
     let mut vertical = Vec::new();
@@ -739,7 +760,7 @@ fn leg_forces(
             continue;
         }
         magnitudes.push(force.norm());
-        let frame = non_empty_or(tf::frame_name(&m.header.frame_id), leg);
+        let frame = non_empty_or(tf::frame_name(&m.header.frame_id), link);
         if let Some(link_pose) = body.link_pose(&frame, t) {
             vertical.push((link_pose.rotation * force).z);
         }
@@ -747,7 +768,7 @@ fn leg_forces(
     if magnitudes.is_empty() {
         return None;
     }
-    let summary = LegForceSummary {
+    let summary = LinkForceSummary {
         topic: topic.to_string(),
         samples: magnitudes.len(),
         mean_force_n: magnitudes.iter().sum::<f64>() / magnitudes.len() as f64,
@@ -759,7 +780,7 @@ fn leg_forces(
     Some((
         summary,
         NamedSeries {
-            name: leg.to_string(),
+            name: link.to_string(),
             points,
         },
     ))

@@ -62,16 +62,21 @@ impl fmt::Display for BagSummary {
             )?,
             _ => writeln!(f, "sinkage: -")?,
         }
-        if !self.leg_forces.is_empty() {
+        if !self.leg_forces.is_empty() || self.body_force.is_some() {
             writeln!(
                 f,
-                "sand force per leg: {:<24} {:>11} {:>11} {:>15}",
-                "leg", "mean |F| N", "peak |F| N", "mean vert. F N"
+                "sand force per link: {:<23} {:>11} {:>11} {:>15}",
+                "link", "mean |F| N", "peak |F| N", "mean vert. F N"
             )?;
-            for (leg, force) in &self.leg_forces {
+            let body = self.body_force.iter().map(|force| ("body", force));
+            let legs = self
+                .leg_forces
+                .iter()
+                .map(|(leg, force)| (leg.as_str(), force));
+            for (link, force) in body.chain(legs) {
                 writeln!(
                     f,
-                    "                    {leg:<24} {:>11.4} {:>11.4} {:>15}",
+                    "                     {link:<23} {:>11.4} {:>11.4} {:>15}",
                     force.mean_force_n,
                     force.peak_force_n,
                     force

@@ -4,8 +4,8 @@
 //! read its plain outputs (robot state, link poses, leg wrenches, the sand surface); they never
 //! see rapier or the solver's internals.
 
-mod leg_loads;
 mod terrain;
+mod terrain_loads;
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -22,9 +22,9 @@ use crate::robot::geometry::{BODY_LINK, LEGS};
 use crate::robot::{GaitCommand, RobotSim, RobotState};
 use crate::terrain::rft::{robot_terrain, RftTerrain};
 use crate::terrain::TerrainModel;
-use leg_loads::LegLoads;
-pub use leg_loads::LegWrench;
 pub use terrain::{RftGround, SandTerrain, Terrain};
+use terrain_loads::TerrainLoads;
+pub use terrain_loads::{LinkWrench, TerrainWrenches};
 
 /// Fastest the robot's body may move before the run is stopped as blown up (m/s): far above
 /// anything a walking robot does, far below what a diverging rigid-body solve produces.
@@ -52,8 +52,9 @@ pub const RFT_SURFACE_HALF_SIDE_M: f32 = 0.2;
 pub struct Simulation {
     robot: Option<Box<RobotSim>>,
     terrain: Terrain,
-    /// The terrain's load on each leg since the last [`Simulation::take_leg_wrenches`].
-    leg_loads: LegLoads,
+    /// The terrain's load on the body and each leg since the last
+    /// [`Simulation::take_terrain_wrenches`].
+    terrain_loads: TerrainLoads,
     /// Substeps taken (sand substeps, or rapier steps without sand).
     steps: u64,
     /// Particle-steps taken (particles times sand substeps).
@@ -110,7 +111,7 @@ impl Simulation {
         Ok(Simulation {
             robot,
             terrain,
-            leg_loads: LegLoads::default(),
+            terrain_loads: TerrainLoads::default(),
             steps: 0,
             particle_steps: 0,
             stop: stop.clone(),
@@ -164,7 +165,10 @@ impl Simulation {
             if self.stop.load(Ordering::Relaxed) {
                 break;
             }
-            match self.terrain.step_robot(robot, dt_s, &mut self.leg_loads) {
+            match self
+                .terrain
+                .step_robot(robot, dt_s, &mut self.terrain_loads)
+            {
                 // Stopped inside the sand's substep: the robot was not stepped (its gait and
                 // motors were already set for the step: `RobotSim::begin_step`).
                 Err(RunError::Sim(e)) if e.is_stop() => break,
@@ -246,21 +250,21 @@ impl Simulation {
         }
     }
 
-    /// Whether [`Self::take_leg_wrenches`] reports the terrain's forces on the legs (the robot on
-    /// MPM sand or on RFT terrain).
-    pub fn has_leg_wrenches(&self) -> bool {
+    /// Whether [`Self::take_terrain_wrenches`] reports the terrain's forces on the robot (the
+    /// robot on MPM sand or on RFT terrain).
+    pub fn has_terrain_wrenches(&self) -> bool {
         self.robot.is_some() && !matches!(self.terrain, Terrain::RigidGround)
     }
 
-    /// The terrain's (MPM sand's or RFT's) mean wrench on each leg since the last call, in each
-    /// leg link's frame; `None` on rigid ground or without a robot, and zero wrenches when no
-    /// time has passed. Resets the sums.
-    pub fn take_leg_wrenches(&mut self) -> Option<Vec<LegWrench>> {
-        if !self.has_leg_wrenches() {
+    /// The terrain's (MPM sand's or RFT's) mean wrench on the body and on each leg since the
+    /// last call, each in its link's frame; `None` on rigid ground or without a robot, and zero
+    /// wrenches when no time has passed. Resets the sums.
+    pub fn take_terrain_wrenches(&mut self) -> Option<TerrainWrenches> {
+        if !self.has_terrain_wrenches() {
             return None;
         }
         let robot = self.robot.as_deref()?;
-        Some(self.leg_loads.take_mean(robot))
+        Some(self.terrain_loads.take_mean(robot))
     }
 
     /// The top of the sand: for each `cell_m` x `cell_m` column that holds particles, the

@@ -2,7 +2,7 @@
 //! CPIC, or resistive force theory, and the one function that puts a terrain's load on the
 //! robot and steps rapier by the same time ([`Terrain::step_robot`]).
 
-use super::leg_loads::{BodyImpulse, LegLoads};
+use super::terrain_loads::{BodyImpulse, TerrainLoads};
 use crate::coupling::Coupling;
 use crate::mpm::Solver;
 use crate::robot::RobotSim;
@@ -109,12 +109,13 @@ impl Terrain {
     /// One step of `dt_s` seconds: the terrain's load on the robot over the step (the sand's
     /// CPIC substep, or the RFT forces with their implicit terms), then one rapier step of the
     /// same `dt_s`, which is what the load was computed for. This is the only place the two
-    /// meet. The terrain's impulse on each leg over the step is added to `leg_loads`.
+    /// meet. The terrain's impulse on the body and each leg over the step is added to
+    /// `terrain_loads`.
     pub fn step_robot(
         &mut self,
         robot: &mut RobotSim,
         dt_s: f64,
-        leg_loads: &mut LegLoads,
+        terrain_loads: &mut TerrainLoads,
     ) -> Result<(), RunError> {
         // The motors' settings for the step first: the sand's exchange reads them
         // (`coupling.motor_impedance`).
@@ -123,7 +124,7 @@ impl Terrain {
         }
         let impulses = self.load(robot, dt_s)?;
         // Moved to the hips before the step moves the links.
-        leg_loads.add_step(robot, &impulses, dt_s);
+        terrain_loads.add_step(robot, &impulses, dt_s);
         robot.finish_step(dt_s);
         Ok(())
     }
