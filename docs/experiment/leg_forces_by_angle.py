@@ -7,9 +7,11 @@ interval, leg link frame), /tf (body pose in odom, each leg link in base_link) a
 
 - lift: the time mean of the legs' vertical (odom z) force, summed over the six legs, in units
   of the robot's weight W (0.085 kg x 9.81 m/s^2);
-- body: the same for the sand's vertical force on the body (/body_wrench, recorded since
-  2026-12-07; absent from older bags); lift + body = 1 on average (tests/terrain_wrenches.rs);
-- thrust: the time mean of the legs' force along the body's x axis, summed, in W;
+- body, body x: the same for the sand's vertical force on the body and its force along odom
+  x, the walking direction (a negative one is drag) (/body_wrench, recorded since 2026-12-07;
+  absent from older bags); lift + body = 1 and thrust + body x = 0 on average for a robot that
+  walks steadily (tests/terrain_wrenches.rs);
+- thrust: the time mean of the legs' force along odom x, summed, in W;
 - the mean vertical force on one leg (in W) by the leg's own joint angle, in 30 deg bins:
   angle 0 = the leg pointing straight down from its hip (docs/robot.md, leg frame), positive
   angles turn its lower half backwards, so the stance runs from about -90 (270) to +90 deg;
@@ -57,7 +59,7 @@ def compose(a, b):
 
 
 def samples(bag):
-    """(t, link, vertical force N, force along body x N, joint angle rad, hip y m) per wrench;
+    """(t, link, force along odom z and x (N), joint angle rad, hip y m) per wrench;
     the body's as link "base_link" with angle and hip y None."""
     path = glob.glob(bag.rstrip("/") + "/*.mcap")[0]
     body_q = None
@@ -81,8 +83,8 @@ def samples(bag):
             t = m.log_time_ns * 1e-9
             first = t if first is None else first
             f = msg.wrench.force
-            vertical = rotate(body_q, [f.x, f.y, f.z])[2]
-            yield t - first, "base_link", vertical, f.x, None, None
+            in_odom = rotate(body_q, [f.x, f.y, f.z])
+            yield t - first, "base_link", in_odom[2], in_odom[0], None, None
         elif topic.startswith("/leg_wrenches/"):
             leg = topic.rsplit("/", 1)[1]
             t = m.log_time_ns * 1e-9
@@ -90,16 +92,19 @@ def samples(bag):
             if body_q is None or leg not in leg_q or leg not in angle:
                 continue
             f = msg.wrench.force
-            in_body = rotate(leg_q[leg], [f.x, f.y, f.z])
-            vertical = rotate(body_q, in_body)[2]
-            yield t - first, leg, vertical, in_body[0], angle[leg], hip_y[leg]
+            in_odom = rotate(body_q, rotate(leg_q[leg], [f.x, f.y, f.z]))
+            yield t - first, leg, in_odom[2], in_odom[0], angle[leg], hip_y[leg]
 
 
 def report(bag, start_s):
     rows = [r for r in samples(bag) if r[0] >= start_s]
     body_rows = [r for r in rows if r[1] == "base_link"]
     rows = [r for r in rows if r[1] != "base_link"]
-    body = sum(r[2] for r in body_rows) / len(body_rows) / WEIGHT_N if body_rows else float("nan")
+    body, body_x = (
+        (sum(r[i] for r in body_rows) / len(body_rows) / WEIGHT_N for i in (2, 3))
+        if body_rows
+        else (float("nan"), float("nan"))
+    )
     legs = sorted({r[1] for r in rows})
     count = collections.Counter(r[1] for r in rows)
     lift = sum(r[2] / count[r[1]] for r in rows) / WEIGHT_N
@@ -116,8 +121,8 @@ def report(bag, start_s):
         "%+.2f" % (by_bin[i] / in_bin[i] / WEIGHT_N) if in_bin[i] else "  nan" for i in range(BINS)
     )
     print(
-        "%s: %d legs, lift %.2f W, body %.2f W, thrust %.2f W, roll rms %.2f p95 %.2f"
-        % (bag, len(legs), lift, body, thrust, math.sqrt((roll**2).mean()), np.percentile(roll, 95))
+        "%s: %d legs, lift %.2f W, body %.2f W, thrust %.2f W, body x %+.2f W, roll rms %.2f p95 %.2f"
+        % (bag, len(legs), lift, body, thrust, body_x, math.sqrt((roll**2).mean()), np.percentile(roll, 95))
     )
     print("  vertical force per leg (W) by angle from", " ".join("%5d" % (i * 30) for i in range(BINS)))
     print("  " + " " * 41 + profile)
