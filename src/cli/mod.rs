@@ -41,7 +41,8 @@ enum Command {
     Sweep(series::SweepArgs),
     /// Write a hexapod URDF (and its leg meshes) from leg and body parameters.
     Urdf(urdf::UrdfArgs),
-    /// Summarise a recorded bag: distance, speed per gait cycle, sinkage, leg forces, commands.
+    /// Summarise a recorded bag: distance, speed per gait cycle, sinkage, leg and body forces,
+    /// commands.
     Analyze(tools::AnalyzeArgs),
     /// Bag tools: `reindex` finishes a bag whose recording was killed.
     #[command(subcommand)]

@@ -1,8 +1,8 @@
 //! One stepping interface over every kind of scene: an optional robot on a terrain (sand alone,
 //! the robot on rigid ground, on MPM sand coupled by CPIC, or on resistive force theory ground
 //! with `terrain.model: rft`). The node and the headless run both drive a [`Simulation`] and
-//! read its plain outputs (robot state, link poses, leg wrenches, the sand surface); they never
-//! see rapier or the solver's internals.
+//! read its plain outputs (robot state, link poses, the terrain's wrenches on the body and the
+//! legs, the sand surface); they never see rapier or the solver's internals.
 
 mod terrain;
 mod terrain_loads;
