@@ -527,8 +527,8 @@ pub struct NodeConfig {
     /// Default `/`.
     pub namespace: String,
     /// Rate of the robot state topics (`joint_states`, `odom`, `/tf`, `body_pose`,
-    /// `body_wrench`, `leg_wrenches/*`) and `/clock`, and of the control tick that applies commands (Hz of
-    /// simulated time). Default 100.
+    /// `body_wrench`, `leg_wrenches/*`) and `/clock`, and of the control tick that applies
+    /// commands (Hz of simulated time). Default 100.
     pub state_rate_hz: f64,
     /// Rate of `sand/surface` (Hz of simulated time); 0 = never. Default 2.
     pub surface_rate_hz: f64,
