@@ -15,11 +15,14 @@
 //! 45 s on 2 cores. The press runs at CFL 0.4 with all sand awake, as measured: a sleeping block
 //! is a rigid support, which could hide the floor this test looks for (with the shipped scene's
 //! CFL 0.8 and sleeping sand since 2026-12-04 it measured +0.35 % and +0.90 %).
+//!
+//! A run also reports when the robot reaches the bed's side (`bed_edge` in the metrics): a
+//! robot that wanders there walks at a wall, not on open sand.
 
 use std::path::Path;
 
 use sandstep::robot::HexapodParams;
-use sandstep::scene::Scene;
+use sandstep::scene::{run_scene, RunOptions, Scene};
 use sandstep::terrain::plate::{depth_cell_means, press_plate, PlatePress};
 
 const SCENE: &str = "config/robot_on_sand.yaml";
@@ -112,4 +115,42 @@ fn the_shipped_beds_floor_does_not_prop_a_pressed_leg() {
             change * 100.0
         );
     }
+}
+
+/// The robot on a cropped 1.25 cm bed (the determinism test's small coupled run), `y_m` left
+/// of the mid-line, run for 20 ms: what its run reports as `bed_edge`, and the scene's frame
+/// interval (s).
+fn bed_edge_of_a_start_at(y_m: f64) -> (serde_json::Value, f64) {
+    let overrides = [
+        "sand.dx_m=0.0125".to_string(),
+        "sand.domain.max_m=[0.2, 0.12, 0.06]".to_string(),
+        "sand.bodies.0.box.max_m=[0.2, 0.12, 0.0]".to_string(),
+        format!("robot.initial_pose.position_m=[0.0, {y_m}]"),
+    ];
+    let scene = Scene::load(Path::new(SCENE), &overrides).unwrap();
+    let opts = RunOptions {
+        duration_s: Some(0.02),
+        ..RunOptions::default()
+    };
+    let summary = run_scene(&scene, &opts).unwrap();
+    (
+        summary.metrics["bed_edge"].clone(),
+        scene.config.output.frame_interval_s,
+    )
+}
+
+/// A robot whose legs reach past the bed's side is reported at the first frame's end, with
+/// the side; one in the middle of the bed is not.
+#[test]
+fn a_run_reports_when_the_robot_reaches_the_beds_side() {
+    assert!(bed_edge_of_a_start_at(0.0).0.is_null());
+    // The legs' outer faces are 3 cm from the mid-line (docs/robot.md): at y = 10 cm they
+    // reach past the 12 cm side.
+    let (edge, frame_s) = bed_edge_of_a_start_at(0.1);
+    println!("{edge}");
+    assert_eq!(edge["sides"], serde_json::json!(["left side (+y)"]));
+    assert!(
+        (edge["time_s"].as_f64().unwrap() - frame_s).abs() < 1e-9,
+        "{edge}"
+    );
 }

@@ -19,7 +19,7 @@ use sandstep::terrain::POPPY_SEEDS_ZETA_N_M3;
 use serde_json::Value;
 
 /// The columns `docs/experiment.md` documents for `results.csv`.
-const CSV_COLUMNS: [&str; 14] = [
+const CSV_COLUMNS: [&str; 17] = [
     "curvature_per_r",
     "frequency_hz",
     "terrain_model",
@@ -31,12 +31,15 @@ const CSV_COLUMNS: [&str; 14] = [
     "sinkage_mean_m",
     "robot_mass_kg",
     "max_tilt_deg",
+    "yaw_change_deg",
+    "travel_direction_deg",
+    "bed_edge_s",
     "wall_time_s",
     "wall_time_per_sim_s",
     "status",
 ];
 /// The columns `docs/experiment.md` documents for `summary.csv`.
-const SUMMARY_COLUMNS: [&str; 11] = [
+const SUMMARY_COLUMNS: [&str; 13] = [
     "curvature_per_r",
     "frequency_hz",
     "terrain_model",
@@ -47,7 +50,9 @@ const SUMMARY_COLUMNS: [&str; 11] = [
     "speed_standard_error_m_s",
     "sinkage_mean_m",
     "max_tilt_deg",
+    "max_abs_travel_direction_deg",
     "turned_over",
+    "reached_bed_edge",
 ];
 /// The sand bed of config/robot_on_sand.yaml (m): x and y extent.
 const BED_X_M: (f64, f64) = (-0.12, 0.8);
@@ -147,6 +152,11 @@ fn run_with(results: &Value, model: &str, k: f64) -> Value {
     assert_eq!(run["frequency_hz"], 2.0);
     assert_eq!(run["cycles"].as_u64(), Some(CYCLES as u64), "{run}");
     assert!((number(&run, "sim_time_s") - 1.625).abs() < 1e-9);
+    assert!(number(&run, "travel_direction_deg").abs() <= 180.0, "{run}");
+    if model == "rft" {
+        // RFT's surface has no sides.
+        assert!(run["bed_edge_s"].is_null(), "{run}");
+    }
     assert!(Path::new(run["bag"].as_str().unwrap())
         .join("metadata.yaml")
         .is_file());
@@ -218,6 +228,10 @@ fn assert_c_legs_win(results: &Value, model: &str) {
     assert!(
         x > BED_X_M.0 && x < BED_X_M.1 && y.abs() < BED_HALF_WIDTH_M,
         "the C-leg robot must stay on the bed: ends at ({x}, {y}) m"
+    );
+    assert!(
+        c["bed_edge_s"].is_null(),
+        "the C-leg robot must walk on open sand, never at the bed's side: {c}"
     );
 }
 

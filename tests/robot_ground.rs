@@ -21,6 +21,9 @@ const SAMPLE_S: f32 = 0.01;
 const PHASE_TOLERANCE_DEG: f64 = 5.0;
 /// Largest tilt of an upright robot (deg).
 const UPRIGHT_DEG: f64 = 20.0;
+/// Largest direction of travel off +x of a robot walking straight (deg): a sideways drift of
+/// a tenth of the distance, the bound on the drift below.
+const STRAIGHT_AHEAD_DEG: f64 = 5.7;
 
 fn sim(frequency_hz: f64, turn_hz: f64) -> RobotSim {
     let mut cfg = RobotConfig {
@@ -92,6 +95,18 @@ fn walks_forward_upright_with_the_tripods_half_a_cycle_apart() {
         "drifted sideways: {:?}",
         m.final_position_m
     );
+    assert!(
+        m.travel_direction_deg.abs() < STRAIGHT_AHEAD_DEG,
+        "walked {} deg off +x",
+        m.travel_direction_deg
+    );
+    // Counter-clockwise from +x: a robot that ends left of its start went off at a positive
+    // angle (it starts at y = 0).
+    assert_eq!(
+        m.travel_direction_deg.signum(),
+        m.final_position_m[1].signum(),
+        "{m:?}"
+    );
     // The legs turned at the commanded frequency: 3 cycles in 3 s.
     let q0 = sim.state().joint_positions_rad[0];
     assert!(
@@ -127,6 +142,14 @@ fn a_faster_right_side_turns_left_and_a_faster_left_side_turns_right() {
             m.yaw_change_deg
         );
         assert!(m.distance_m > 0.1, "still walks forward: {}", m.distance_m);
+        // A robot on an arc goes off in the direction it turns, by less than it turns.
+        assert!(
+            m.travel_direction_deg * sign > 0.0
+                && m.travel_direction_deg * sign < m.yaw_change_deg * sign,
+            "difference {difference_hz} Hz: went {} deg off +x, turned {} deg",
+            m.travel_direction_deg,
+            m.yaw_change_deg
+        );
     }
 }
 
@@ -185,6 +208,8 @@ fn the_shipped_scene_runs_and_reports_metrics() {
         "mean_speed_m_s",
         "final_position_m",
         "max_tilt_deg",
+        "yaw_change_deg",
+        "travel_direction_deg",
     ] {
         assert!(json.get(key).is_some(), "metric {key} missing: {json}");
     }

@@ -304,12 +304,14 @@ fn run_scene(experiment: &Experiment, spec: &RunSpec, urdf: &Path) -> Result<Sce
     Scene::load(&cfg.base_scene, &overrides)
 }
 
-/// Follows a run: the progress bar, the robot's mass and its latest metrics.
+/// Follows a run: the progress bar, the robot's mass, its latest metrics and when it reached
+/// the sand bed's side.
 struct RunWatch<'a> {
     progress: &'a Progress,
     robot_mass_kg: Option<f64>,
     metrics: Option<RobotMetrics>,
     particles: usize,
+    bed_edge_s: Option<f64>,
 }
 
 impl Observer for RunWatch<'_> {
@@ -322,6 +324,7 @@ impl Observer for RunWatch<'_> {
             self.metrics = Some(robot.metrics());
         }
         self.particles = sim.solver().map_or(0, |s| s.particles.len());
+        self.bed_edge_s = sim.bed_edge().map(|edge| edge.time_s);
         Ok(())
     }
 }
@@ -359,14 +362,17 @@ fn run_one(
         robot_mass_kg: None,
         metrics: None,
         particles: 0,
+        bed_edge_s: None,
     };
     let recorded = crate::ros::record_run(&scene, &run_opts, Some(&bag_dir), &mut watch);
     result.robot_mass_kg = watch.robot_mass_kg;
     result.particles = Some(watch.particles);
+    result.bed_edge_s = watch.bed_edge_s;
     if let Some(m) = watch.metrics {
         result.max_tilt_deg = Some(m.max_tilt_deg);
         result.final_position_m = Some(m.final_position_m);
         result.yaw_change_deg = Some(m.yaw_change_deg);
+        result.travel_direction_deg = Some(m.travel_direction_deg);
     }
     let run = match recorded {
         Ok(run) => run,
@@ -446,7 +452,7 @@ pub fn report_table(report: &ExperimentReport) -> String {
         report.out_dir
     );
     text.push_str(&format!(
-        "{:>6} {:>5} {:>4} {:>8} {:>9} {:>17} {:>6} {:>8} {:>9} {:>6} {:>7}  status\n",
+        "{:>6} {:>5} {:>4} {:>8} {:>9} {:>17} {:>6} {:>8} {:>9} {:>6} {:>6} {:>6} {:>7}  status\n",
         "k(1/R)",
         "f Hz",
         "model",
@@ -457,6 +463,8 @@ pub fn report_table(report: &ExperimentReport) -> String {
         "sink mm",
         "mass g",
         "tilt",
+        "dir",
+        "edge s",
         "wall/s"
     ));
     for r in &report.runs {
@@ -465,7 +473,10 @@ pub fn report_table(report: &ExperimentReport) -> String {
             _ => "-".into(),
         };
         text.push_str(&format!(
-            "{:>6} {:>5} {:>4} {:>8.1} {:>9} {:>17} {:>6} {:>8} {:>9} {:>6} {:>7}  {}\n",
+            concat!(
+                "{:>6} {:>5} {:>4} {:>8.1} {:>9} {:>17} {:>6} {:>8} {:>9} ",
+                "{:>6} {:>6} {:>6} {:>7}  {}\n"
+            ),
             config::number(r.curvature_per_r),
             config::number(r.frequency_hz),
             r.terrain_model,
@@ -476,6 +487,8 @@ pub fn report_table(report: &ExperimentReport) -> String {
             fmt_opt(r.sinkage_mean_m.map(|s| s * 1e3), 1),
             fmt_opt(r.robot_mass_kg.map(|m| m * 1e3), 3),
             fmt_opt(r.max_tilt_deg, 0),
+            fmt_opt(r.travel_direction_deg, 0),
+            fmt_opt(r.bed_edge_s, 2),
             r.wall_time_per_sim_s
                 .map_or("-".into(), |w| format!("{w:.2}")),
             r.status
@@ -483,7 +496,7 @@ pub fn report_table(report: &ExperimentReport) -> String {
     }
     if report.cells.iter().any(|c| c.starts > 1) {
         text.push_str(&format!(
-            "\nover starts ({}):\n{:>6} {:>5} {:>4} {:>11} {:>26} {:>8} {:>8} {:>6}\n",
+            "\nover starts ({}):\n{:>6} {:>5} {:>4} {:>11} {:>26} {:>8} {:>8} {:>9} {:>6} {:>6}\n",
             SUMMARY_CSV,
             "k(1/R)",
             "f Hz",
@@ -492,7 +505,9 @@ pub fn report_table(report: &ExperimentReport) -> String {
             "speed m/s (std, std err)",
             "sink mm",
             "max tilt",
-            "over"
+            "max |dir|",
+            "over",
+            "edge"
         ));
         for c in &report.cells {
             let speed = match (
@@ -505,7 +520,7 @@ pub fn report_table(report: &ExperimentReport) -> String {
                 _ => "-".into(),
             };
             text.push_str(&format!(
-                "{:>6} {:>5} {:>4} {:>11} {:>26} {:>8} {:>8} {:>6}\n",
+                "{:>6} {:>5} {:>4} {:>11} {:>26} {:>8} {:>8} {:>9} {:>6} {:>6}\n",
                 config::number(c.curvature_per_r),
                 config::number(c.frequency_hz),
                 c.terrain_model,
@@ -513,7 +528,9 @@ pub fn report_table(report: &ExperimentReport) -> String {
                 speed,
                 fmt_opt(c.sinkage_mean_m.map(|s| s * 1e3), 1),
                 fmt_opt(c.max_tilt_deg, 0),
-                c.turned_over
+                fmt_opt(c.max_abs_travel_direction_deg, 0),
+                c.turned_over,
+                c.reached_bed_edge
             ));
         }
     }

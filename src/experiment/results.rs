@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 use crate::analysis::bag::mean_and_sample_std;
 
 /// The columns of `results.csv`, in order (`docs/experiment.md`).
-pub const CSV_COLUMNS: [&str; 14] = [
+pub const CSV_COLUMNS: [&str; 17] = [
     "curvature_per_r",
     "frequency_hz",
     "terrain_model",
@@ -19,6 +19,9 @@ pub const CSV_COLUMNS: [&str; 14] = [
     "sinkage_mean_m",
     "robot_mass_kg",
     "max_tilt_deg",
+    "yaw_change_deg",
+    "travel_direction_deg",
+    "bed_edge_s",
     "wall_time_s",
     "wall_time_per_sim_s",
     "status",
@@ -70,8 +73,17 @@ pub struct RunResult {
     pub sim_time_s: Option<f64>,
     /// Body position at the end (m, odom).
     pub final_position_m: Option<[f64; 3]>,
-    /// Heading change over the run (deg).
+    /// Heading change over the run (deg; the body's x axis at the end, a snapshot of a
+    /// heading that swings within each gait cycle).
     pub yaw_change_deg: Option<f64>,
+    /// Direction of the body's horizontal displacement over the run, counter-clockwise from
+    /// +x (deg): where the robot went.
+    #[serde(default)]
+    pub travel_direction_deg: Option<f64>,
+    /// When the robot reached a side of the sand bed (s; absent if it never did): from then on
+    /// it was at or over the bed's edge, not on open sand.
+    #[serde(default)]
+    pub bed_edge_s: Option<f64>,
     /// Sand particles (0 without MPM sand).
     pub particles: Option<usize>,
     /// The URDF the run used.
@@ -87,7 +99,7 @@ impl RunResult {
     }
 
     /// The CSV cells of this row, in [`CSV_COLUMNS`] order.
-    fn csv_cells(&self) -> [String; 14] {
+    fn csv_cells(&self) -> [String; 17] {
         [
             format!("{}", self.curvature_per_r),
             format!("{}", self.frequency_hz),
@@ -100,6 +112,9 @@ impl RunResult {
             opt(self.sinkage_mean_m),
             opt(self.robot_mass_kg),
             opt(self.max_tilt_deg),
+            opt(self.yaw_change_deg),
+            opt(self.travel_direction_deg),
+            opt(self.bed_edge_s),
             opt(self.wall_time_s),
             opt(self.wall_time_per_sim_s),
             self.status.clone(),
@@ -145,7 +160,7 @@ pub fn write_results_csv(path: &Path, runs: &[RunResult]) -> std::io::Result<()>
 }
 
 /// The columns of `summary.csv`, in order (`docs/experiment.md`).
-pub const SUMMARY_COLUMNS: [&str; 11] = [
+pub const SUMMARY_COLUMNS: [&str; 13] = [
     "curvature_per_r",
     "frequency_hz",
     "terrain_model",
@@ -156,7 +171,9 @@ pub const SUMMARY_COLUMNS: [&str; 11] = [
     "speed_standard_error_m_s",
     "sinkage_mean_m",
     "max_tilt_deg",
+    "max_abs_travel_direction_deg",
     "turned_over",
+    "reached_bed_edge",
 ];
 
 /// A tilt beyond this (deg) puts the body's up axis below the horizon: the robot is on its
@@ -186,12 +203,19 @@ pub struct CellSummary {
     pub sinkage_mean_m: Option<f64>,
     /// Largest tilt over the cell's runs (deg).
     pub max_tilt_deg: Option<f64>,
+    /// Largest magnitude of a run's direction of travel over the cell's runs (deg): how far
+    /// from straight ahead the worst start went.
+    #[serde(default)]
+    pub max_abs_travel_direction_deg: Option<f64>,
     /// Runs that tilted beyond [`TURNED_OVER_TILT_DEG`].
     pub turned_over: usize,
+    /// Runs in which the robot reached a side of the sand bed.
+    #[serde(default)]
+    pub reached_bed_edge: usize,
 }
 
 impl CellSummary {
-    fn csv_cells(&self) -> [String; 11] {
+    fn csv_cells(&self) -> [String; 13] {
         [
             format!("{}", self.curvature_per_r),
             format!("{}", self.frequency_hz),
@@ -203,7 +227,9 @@ impl CellSummary {
             opt(self.speed_standard_error_m_s),
             opt(self.sinkage_mean_m),
             opt(self.max_tilt_deg),
+            opt(self.max_abs_travel_direction_deg),
             self.turned_over.to_string(),
+            self.reached_bed_edge.to_string(),
         ]
     }
 }
@@ -249,7 +275,12 @@ pub fn summarize(runs: &[RunResult]) -> Vec<CellSummary> {
             cell.speed_std_m_s.map(|s| s / (speeds.len() as f64).sqrt());
         cell.sinkage_mean_m = mean_and_sample_std(&sinkages).map(|(mean, _)| mean);
         cell.max_tilt_deg = tilts.clone().reduce(f64::max);
+        cell.max_abs_travel_direction_deg = members
+            .iter()
+            .filter_map(|r| r.travel_direction_deg.map(f64::abs))
+            .reduce(f64::max);
         cell.turned_over = tilts.filter(|&t| t > TURNED_OVER_TILT_DEG).count();
+        cell.reached_bed_edge = members.iter().filter(|r| r.bed_edge_s.is_some()).count();
     }
     cells
 }
@@ -279,6 +310,9 @@ mod tests {
             sinkage_mean_m: None,
             robot_mass_kg: Some(0.085),
             max_tilt_deg: Some(12.5),
+            yaw_change_deg: Some(-7.5),
+            travel_direction_deg: Some(2.5),
+            bed_edge_s: Some(1.25),
             wall_time_s: Some(200.0),
             wall_time_per_sim_s: Some(80.0),
             status: STATUS_OK.into(),
@@ -300,16 +334,30 @@ mod tests {
         assert_eq!(lines[0], CSV_COLUMNS.join(","));
         assert_eq!(
             lines[1],
-            "-0.5,2,mpm,0,0.125,0.12,0.01,4,,0.085,12.5,200,80,ok"
+            "-0.5,2,mpm,0,0.125,0.12,0.01,4,,0.085,12.5,-7.5,2.5,1.25,200,80,ok"
         );
         // The failure's message is one quoted cell, quotes doubled, line break kept.
         assert_eq!(
             lines[2],
-            "1,1,rft,0,,,,,,,,,,\"--set terrain.model=rft: unknown field `terrain`, expected \"\"x\"\""
+            concat!(
+                "1,1,rft,0,,,,,,,,,,,,,",
+                "\"--set terrain.model=rft: unknown field `terrain`, expected \"\"x\"\""
+            )
         );
         assert_eq!(lines[3], "more\"");
         assert_eq!(text.matches('\n').count(), 4);
         assert_eq!(lines[1].split(',').count(), CSV_COLUMNS.len());
+    }
+
+    #[test]
+    fn results_written_before_the_direction_and_bed_edge_columns_still_read() {
+        let mut old = serde_json::to_value(row()).unwrap();
+        for key in ["travel_direction_deg", "bed_edge_s"] {
+            old.as_object_mut().unwrap().remove(key);
+        }
+        let read: RunResult = serde_json::from_value(old).unwrap();
+        assert_eq!((read.travel_direction_deg, read.bed_edge_s), (None, None));
+        assert_eq!(read.max_tilt_deg, row().max_tilt_deg);
     }
 
     #[test]
@@ -337,6 +385,8 @@ mod tests {
             speed_per_cycle_mean_m_s: v,
             sinkage_mean_m: v.map(|v| v / 10.0),
             max_tilt_deg: Some(tilt),
+            travel_direction_deg: Some(if tilt > 25.0 { -tilt / 2.0 } else { tilt / 4.0 }),
+            bed_edge_s: (tilt > 25.0).then_some(1.0),
             status: status.into(),
             ..row()
         };
@@ -358,6 +408,9 @@ mod tests {
         assert!((c.sinkage_mean_m.unwrap() - 0.02).abs() < 1e-12);
         // The failed run's tilt counts: it turned over before it failed.
         assert_eq!((c.max_tilt_deg, c.turned_over), (Some(95.0), 1));
+        // The largest direction off +x in either sense: -47.5 deg, the failed run's.
+        assert_eq!(c.max_abs_travel_direction_deg, Some(47.5));
+        assert_eq!(c.reached_bed_edge, 2);
         let single = &cells[1];
         assert_eq!(
             (single.starts, single.completed, single.turned_over),
@@ -366,6 +419,9 @@ mod tests {
         assert_eq!(single.speed_std_m_s, None);
         let text = summary_csv(&cells);
         assert_eq!(text.lines().next().unwrap(), SUMMARY_COLUMNS.join(","));
-        assert_eq!(text.lines().nth(2).unwrap(), "-1,2,mpm,1,1,0,,,0,120,1");
+        assert_eq!(
+            text.lines().nth(2).unwrap(),
+            "-1,2,mpm,1,1,0,,,0,120,60,1,1"
+        );
     }
 }

@@ -75,8 +75,14 @@ pub struct RobotMetrics {
     pub final_position_m: [f64; 3],
     /// Largest angle between the body's up axis and world +z seen at any step (deg).
     pub max_tilt_deg: f64,
-    /// Change of heading since the start, counter-clockwise seen from above (deg).
+    /// Change of heading since the start, counter-clockwise seen from above (deg): where the
+    /// body's x axis points at the end. A tripod gait swings it back and forth within each
+    /// cycle (by 9 to 19 deg at 4 Hz on sand, `docs/robot.md`), so it is a snapshot.
     pub yaw_change_deg: f64,
+    /// Direction of the body's horizontal displacement since the start, counter-clockwise from
+    /// world +x seen from above (deg, in (-180, 180]; 0 before the body has moved): where the
+    /// robot went, which no within-cycle swing disturbs.
+    pub travel_direction_deg: f64,
 }
 
 /// The hexapod on rigid ground.
@@ -446,6 +452,9 @@ impl RobotSim {
             final_position_m: p,
             max_tilt_deg: self.max_tilt_rad.to_degrees(),
             yaw_change_deg: self.yaw_change_rad.to_degrees(),
+            // + 0.0 turns a sideways displacement of -0.0 into +0.0: straight back is +180.
+            travel_direction_deg: libm::atan2(p[1] - self.start_position_m[1] + 0.0, distance_m)
+                .to_degrees(),
         }
     }
 

@@ -19,6 +19,8 @@
 //! the shipped bed walks as a deeper and longer one does.
 
 use rapier3d::glamx::Vec3;
+use rapier3d::parry::bounding_volume::Aabb;
+use rapier3d::prelude::{Collider, Pose, RigidBody};
 
 use crate::robot::RobotSim;
 
@@ -44,6 +46,43 @@ fn to_f64(v: Vec3) -> [f64; 3] {
     [v.x as f64, v.y as f64, v.z as f64]
 }
 
+/// A collider's world pose and bounding box. World poses of colliders are synchronised only by
+/// a step: they are composed here from the body's.
+fn world_aabb(body: &RigidBody, collider: &Collider) -> (Pose, Aabb) {
+    let pose = *body.position() * collider.position_wrt_parent().copied().unwrap_or_default();
+    (pose, collider.shape().compute_aabb(&pose))
+}
+
+/// The box the robot's colliders (body and legs) occupy now (m): min and max corners.
+pub fn robot_box_m(robot: &RobotSim) -> [[f64; 3]; 2] {
+    let world = robot.world();
+    let mut bounds = EMPTY_BOX;
+    for handle in std::iter::once(robot.body_handle()).chain(robot.leg_handles()) {
+        let body = &world.bodies[handle];
+        for &c in body.colliders() {
+            let (_, aabb) = world_aabb(body, &world.colliders[c]);
+            include(&mut bounds, to_f64(aabb.mins), to_f64(aabb.maxs));
+        }
+    }
+    bounds
+}
+
+/// The sides of the bed `bed_m` (m, min and max corners) that the robot's box `robot_m`
+/// ([`robot_box_m`]) reaches or crosses, named as in [`BedRule::shortfalls`]: there the robot is
+/// at or over the bed's edge, not on open sand.
+pub fn sides_reached(robot_m: [[f64; 3]; 2], bed_m: [[f64; 3]; 2]) -> Vec<&'static str> {
+    let ([lo, hi], [bed_lo, bed_hi]) = (robot_m, bed_m);
+    [
+        ("right side (-y)", lo[1] <= bed_lo[1]),
+        ("left side (+y)", hi[1] >= bed_hi[1]),
+        ("back (-x)", lo[0] <= bed_lo[0]),
+        ("front (+x)", hi[0] >= bed_hi[0]),
+    ]
+    .into_iter()
+    .filter_map(|(side, reached)| reached.then_some(side))
+    .collect()
+}
+
 /// The rule applied to a robot at its start pose.
 #[derive(Clone, Debug, PartialEq)]
 pub struct BedRule {
@@ -67,10 +106,7 @@ impl BedRule {
             let mut leg_y = [f64::INFINITY, f64::NEG_INFINITY];
             for &c in rb.colliders() {
                 let collider = &world.colliders[c];
-                // World poses of colliders are synchronised only by a step: compose them here.
-                let pose =
-                    *rb.position() * collider.position_wrt_parent().copied().unwrap_or_default();
-                let aabb = collider.shape().compute_aabb(&pose);
+                let (pose, aabb) = world_aabb(rb, collider);
                 leg_y = [
                     leg_y[0].min(aabb.mins.y as f64),
                     leg_y[1].max(aabb.maxs.y as f64),
@@ -121,10 +157,7 @@ impl BedRule {
         ];
         let body = &world.bodies[robot.body_handle()];
         for &c in body.colliders() {
-            let collider = &world.colliders[c];
-            let pose =
-                *body.position() * collider.position_wrt_parent().copied().unwrap_or_default();
-            let aabb = collider.shape().compute_aabb(&pose);
+            let (_, aabb) = world_aabb(body, &world.colliders[c]);
             include(&mut swept_m, to_f64(aabb.mins), to_f64(aabb.maxs));
         }
         let (end, side) = (
@@ -243,5 +276,41 @@ mod tests {
         );
         let narrow = [[bed[0][0], -0.1, bed[0][2]], bed[1]];
         assert!(rule.shortfalls(narrow)[0].starts_with("right side"));
+    }
+
+    #[test]
+    fn a_robot_reaches_the_sides_its_colliders_touch_or_cross() {
+        let bed = [[-0.1, -0.1, -0.06], [0.8, 0.1, 0.0]];
+        let inside = [[-0.05, -0.05, 0.0], [0.05, 0.05, 0.05]];
+        assert!(sides_reached(inside, bed).is_empty());
+        let left_front = [[0.7, 0.05, 0.0], [0.85, 0.1, 0.05]];
+        assert_eq!(
+            sides_reached(left_front, bed),
+            ["left side (+y)", "front (+x)"]
+        );
+        let right_back = [[-0.12, -0.11, 0.0], [0.0, 0.0, 0.05]];
+        assert_eq!(
+            sides_reached(right_back, bed),
+            ["right side (-y)", "back (-x)"]
+        );
+    }
+
+    #[test]
+    fn the_robots_box_holds_its_legs_and_body_where_they_stand() {
+        let scene = Scene::load(Path::new("config/robot_on_sand.yaml"), &[]).unwrap();
+        let robot = RobotSim::new(scene.config.robot.as_ref().unwrap(), [0.0, 0.0, -9.81]).unwrap();
+        let [lo, hi] = robot_box_m(&robot);
+        // The hexapod (docs/robot.md): hips at x = +-6 cm with legs of 4.1 cm chord, leg
+        // mid-planes 2.5 cm either side with legs 1 cm wide, the belly 13 x 2 cm.
+        assert!(lo[0] < -0.065 && hi[0] > 0.065, "x {lo:?} {hi:?}");
+        assert!(
+            (lo[1] + 0.03).abs() < 1e-3 && (hi[1] - 0.03).abs() < 1e-3,
+            "y {lo:?} {hi:?}"
+        );
+        let bed = scene.bed_box_m().unwrap();
+        assert!(sides_reached([lo, hi], bed).is_empty());
+        // Moved 10 cm to the left, its left legs reach past the 12 cm side.
+        let moved = [[lo[0], lo[1] + 0.1, lo[2]], [hi[0], hi[1] + 0.1, hi[2]]];
+        assert_eq!(sides_reached(moved, bed), ["left side (+y)"]);
     }
 }

@@ -198,6 +198,17 @@ pub fn run_simulation_observed(
             metrics.insert("robot_mass_kg".into(), json!(robot.total_mass_kg()));
             metrics.insert("dx_m".into(), json!(solver.grid().dx));
             metrics.insert("bed_shortfalls".into(), json!(sim.bed_shortfalls()));
+            metrics.insert("bed_edge".into(), json!(sim.bed_edge()));
+            if let Some(edge) = sim.bed_edge() {
+                eprintln!(
+                    "warning: {}: the robot reached the sand bed's {} at t = {:.2} s: from \
+                     then on it was at or over the bed's edge, not on open sand (a wider or \
+                     longer bed: docs/scenes.md, \"How big a bed\")",
+                    scene.file.display(),
+                    edge.sides.join(" and "),
+                    edge.time_s
+                );
+            }
             if let Some(window) = sim.sand_window() {
                 metrics.insert("sand_window_m".into(), json!(window.x_m));
                 metrics.insert("sand_added".into(), json!(window.added));

@@ -12,7 +12,7 @@ use std::sync::Arc;
 
 use rapier3d::prelude::RigidBodyHandle;
 
-use super::bed::BedRule;
+use super::bed::{robot_box_m, sides_reached, BedRule};
 use super::error::RunError;
 use super::robot_sand::{leg_sinkage_m, robot_coupling};
 use super::sand_window::SandWindow;
@@ -22,7 +22,7 @@ use crate::robot::geometry::{BODY_LINK, LEGS};
 use crate::robot::{GaitCommand, RobotSim, RobotState};
 use crate::terrain::rft::{robot_terrain, RftTerrain};
 use crate::terrain::TerrainModel;
-pub use terrain::{RftGround, SandTerrain, Terrain};
+pub use terrain::{BedEdge, RftGround, SandTerrain, Terrain};
 use terrain_loads::TerrainLoads;
 pub use terrain_loads::{LinkWrench, TerrainWrenches};
 
@@ -180,6 +180,17 @@ impl Simulation {
                 self.particle_steps += sand.solver.particles.len() as u64;
             }
         }
+        if let Terrain::Sand(sand) = &mut self.terrain {
+            if let (None, Some(bed_m)) = (&sand.bed_edge, sand.bed_m) {
+                let sides = sides_reached(robot_box_m(robot), bed_m);
+                if !sides.is_empty() {
+                    sand.bed_edge = Some(BedEdge {
+                        time_s: robot.time_s(),
+                        sides,
+                    });
+                }
+            }
+        }
         Ok(())
     }
 
@@ -206,6 +217,11 @@ impl Simulation {
         self.terrain
             .sand()
             .map_or(&[], |sand| sand.bed_shortfalls.as_slice())
+    }
+
+    /// When the robot first reached a side of the sand bed, if it has (`src/scene/bed.rs`).
+    pub fn bed_edge(&self) -> Option<&BedEdge> {
+        self.terrain.sand().and_then(|sand| sand.bed_edge.as_ref())
     }
 
     /// The sand window following the robot (`sand.window`), if the scene has one.
@@ -375,6 +391,8 @@ fn sand_terrain(
             coupling: None,
             window: None,
             bed_shortfalls: Vec::new(),
+            bed_m: None,
+            bed_edge: None,
         });
     };
     let window = scene
@@ -382,7 +400,8 @@ fn sand_terrain(
         .and_then(|s| s.window)
         .map(|w| Box::new(SandWindow::new(scene, w, &mut solver, robot_x_m(robot))));
     let coupling = robot_coupling(robot, &scene.config.coupling, solver.grid().dx)?;
-    let bed_shortfalls = scene.bed_box_m().map_or(Vec::new(), |bed| {
+    let bed_m = scene.bed_box_m();
+    let bed_shortfalls = bed_m.map_or(Vec::new(), |bed| {
         BedRule::for_robot(robot, bed[1][2]).shortfalls(bed)
     });
     let surface_z_m = top(&solver);
@@ -392,6 +411,8 @@ fn sand_terrain(
         surface_z_m,
         window,
         bed_shortfalls,
+        bed_m,
+        bed_edge: None,
     })
 }
 

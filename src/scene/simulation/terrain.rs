@@ -36,6 +36,20 @@ pub struct SandTerrain {
     pub window: Option<Box<SandWindow>>,
     /// Where the bed falls short of the bed rule at the start (`src/scene/bed.rs`).
     pub bed_shortfalls: Vec<String>,
+    /// The bed (m, min and max corners) when the sand is box-shaped bodies.
+    pub bed_m: Option<[[f64; 3]; 2]>,
+    /// When the robot first reached a side of the bed, if it has.
+    pub bed_edge: Option<BedEdge>,
+}
+
+/// The first time the robot's colliders reached a side of the sand bed (checked at the end of
+/// every frame): from then on the robot is at or over the bed's edge, not on open sand.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct BedEdge {
+    /// Simulated time of the frame's end (s).
+    pub time_s: f64,
+    /// The sides reached, as `src/scene/bed.rs` names them (`left side (+y)`, ...).
+    pub sides: Vec<&'static str>,
 }
 
 /// The RFT terrain and its step.
