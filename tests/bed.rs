@@ -17,7 +17,7 @@
 //! CFL 0.8 and sleeping sand since 2026-12-04 it measured +0.35 % and +0.90 %).
 //!
 //! A run also reports when the robot reaches the bed's side (`bed_edge` in the metrics): a
-//! robot that wanders there walks at a wall, not on open sand.
+//! robot that wanders there is at or over the bed's edge, not on open sand.
 
 use std::path::Path;
 

@@ -31,6 +31,12 @@ pub const SIDE_MARGIN_PER_REACH: f64 = 2.0;
 /// Least sand behind and ahead of the legs' swept box at the start, per leg reach.
 pub const END_MARGIN_PER_REACH: f64 = 0.4;
 
+/// The bed's sides and ends by name, as the warnings and metrics give them.
+pub const RIGHT_SIDE: &str = "right side (-y)";
+pub const LEFT_SIDE: &str = "left side (+y)";
+pub const BACK_END: &str = "back (-x)";
+pub const FRONT_END: &str = "front (+x)";
+
 /// A box `[min, max]` that [`include`] grows from nothing.
 const EMPTY_BOX: [[f64; 3]; 2] = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
 
@@ -73,10 +79,10 @@ pub fn robot_box_m(robot: &RobotSim) -> [[f64; 3]; 2] {
 pub fn sides_reached(robot_m: [[f64; 3]; 2], bed_m: [[f64; 3]; 2]) -> Vec<&'static str> {
     let ([lo, hi], [bed_lo, bed_hi]) = (robot_m, bed_m);
     [
-        ("right side (-y)", lo[1] <= bed_lo[1]),
-        ("left side (+y)", hi[1] >= bed_hi[1]),
-        ("back (-x)", lo[0] <= bed_lo[0]),
-        ("front (+x)", hi[0] >= bed_hi[0]),
+        (RIGHT_SIDE, lo[1] <= bed_lo[1]),
+        (LEFT_SIDE, hi[1] >= bed_hi[1]),
+        (BACK_END, lo[0] <= bed_lo[0]),
+        (FRONT_END, hi[0] >= bed_hi[0]),
     ]
     .into_iter()
     .filter_map(|(side, reached)| reached.then_some(side))
@@ -202,8 +208,8 @@ impl BedRule {
             format!("{DEPTH_PER_REACH} x reach {r_cm:.2} cm"),
         );
         for (name, by_m) in [
-            ("right side (-y)", lo[1] - need_lo[1]),
-            ("left side (+y)", need_hi[1] - hi[1]),
+            (RIGHT_SIDE, lo[1] - need_lo[1]),
+            (LEFT_SIDE, need_hi[1] - hi[1]),
         ] {
             short(
                 name,
@@ -212,8 +218,8 @@ impl BedRule {
             );
         }
         for (name, by_m) in [
-            ("back (-x)", lo[0] - need_lo[0]),
-            ("front (+x)", need_hi[0] - hi[0]),
+            (BACK_END, lo[0] - need_lo[0]),
+            (FRONT_END, need_hi[0] - hi[0]),
         ] {
             short(
                 name,
@@ -284,15 +290,9 @@ mod tests {
         let inside = [[-0.05, -0.05, 0.0], [0.05, 0.05, 0.05]];
         assert!(sides_reached(inside, bed).is_empty());
         let left_front = [[0.7, 0.05, 0.0], [0.85, 0.1, 0.05]];
-        assert_eq!(
-            sides_reached(left_front, bed),
-            ["left side (+y)", "front (+x)"]
-        );
+        assert_eq!(sides_reached(left_front, bed), [LEFT_SIDE, FRONT_END]);
         let right_back = [[-0.12, -0.11, 0.0], [0.0, 0.0, 0.05]];
-        assert_eq!(
-            sides_reached(right_back, bed),
-            ["right side (-y)", "back (-x)"]
-        );
+        assert_eq!(sides_reached(right_back, bed), [RIGHT_SIDE, BACK_END]);
     }
 
     #[test]
@@ -311,6 +311,6 @@ mod tests {
         assert!(sides_reached([lo, hi], bed).is_empty());
         // Moved 10 cm to the left, its left legs reach past the 12 cm side.
         let moved = [[lo[0], lo[1] + 0.1, lo[2]], [hi[0], hi[1] + 0.1, hi[2]]];
-        assert_eq!(sides_reached(moved, bed), ["left side (+y)"]);
+        assert_eq!(sides_reached(moved, bed), [LEFT_SIDE]);
     }
 }
