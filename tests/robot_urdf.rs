@@ -219,8 +219,9 @@ fn generator_writes_intermediate_curvatures_into_a_fresh_folder() {
     assert!(err.contains("curvature_per_m = 100"), "{err}");
 }
 
-/// `sandstep urdf` places the hips where its options say (the assumed layout of
-/// `docs/robot.md` is one choice among those a study measures), and refuses a wrong count.
+/// `sandstep urdf` places the hips and the body's centre of mass where its options say (the
+/// assumed layout of `docs/robot.md` is one choice among those a study measures), and refuses a
+/// wrong count.
 #[test]
 fn urdf_command_places_the_hips_it_is_given() {
     let tmp = tempfile::tempdir().unwrap();
@@ -236,9 +237,10 @@ fn urdf_command_places_the_hips_it_is_given() {
     };
     let out = urdf(&[
         "--hip-x-m=0.05,0.001,-0.055",
-        "--hip-y-m=0.03",
+        "--hip-y-m=0.03,0.035,0.03",
         "--hip-z-m=-0.004",
         "--body-height-m=0.02",
+        "--body-com-m=0.01,0,-0.005",
     ]);
     assert!(
         out.status.success(),
@@ -253,7 +255,7 @@ fn urdf_command_places_the_hips_it_is_given() {
     let close = |a: [f64; 3], b: [f64; 3]| a.iter().zip(b).all(|(a, b)| (a - b).abs() < 1e-9);
     for (joint, expected) in [
         ("leg_front_left_joint", [0.05, 0.03, -0.004]),
-        ("leg_middle_right_joint", [0.001, -0.03, -0.004]),
+        ("leg_middle_right_joint", [0.001, -0.035, -0.004]),
         ("leg_rear_left_joint", [-0.055, 0.03, -0.004]),
     ] {
         assert!(
@@ -267,6 +269,13 @@ fn urdf_command_places_the_hips_it_is_given() {
         Geometry::Box { size } => assert!((size.0[2] - 0.02).abs() < 1e-9, "{:?}", size.0),
         other => panic!("body collision is {other:?}"),
     }
+    // The body's centre of mass goes where the option puts it.
+    let inertial = &body.inertial;
+    let com = inertial.origin.xyz.0;
+    assert!(
+        close(com, [0.01, 0.0, -0.005]),
+        "body centre of mass {com:?}"
+    );
     let out = urdf(&["--hip-x-m=0.05,0.0"]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--hip-x-m"));

@@ -42,6 +42,10 @@ pub struct UrdfArgs {
     /// Body (belly) height along z (m; assumed, not published).
     #[arg(long, default_value_t = HexapodParams::default().body_height_m)]
     pub body_height_m: f64,
+    /// The body's centre of mass relative to the centre of its box, x,y,z (m; assumed), inside
+    /// the box; the inertia stays the uniform box's. Default 0,0,0.
+    #[arg(long, value_parser = three_numbers, allow_hyphen_values = true, value_name = "X,Y,Z")]
+    pub body_com_m: Option<[f64; 3]>,
     /// Hip x positions in the body frame, front, middle, rear (m; assumed): three
     /// comma-separated values. Default: the assumed layout of docs/robot.md.
     #[arg(
@@ -51,9 +55,10 @@ pub struct UrdfArgs {
         value_name = "FRONT,MIDDLE,REAR"
     )]
     pub hip_x_m: Option<[f64; 3]>,
-    /// Lateral distance of each leg's mid-plane from the body's mid-plane (m; assumed).
-    #[arg(long, default_value_t = HexapodParams::default().hip_y_m)]
-    pub hip_y_m: f64,
+    /// Lateral distance of each leg's mid-plane from the body's mid-plane (m; assumed): one
+    /// value for all legs, or front,middle,rear. Default: the assumed layout of docs/robot.md.
+    #[arg(long, value_parser = one_or_three_numbers, value_name = "Y | FRONT,MIDDLE,REAR")]
+    pub hip_y_m: Option<[f64; 3]>,
     /// Height of the hip axes above the body's centre (m; assumed), negative below it.
     #[arg(long, default_value_t = HexapodParams::default().hip_z_m, allow_negative_numbers = true)]
     pub hip_z_m: f64,
@@ -69,8 +74,9 @@ impl UrdfArgs {
         p.legs.density_kg_m3 = self.density_kg_m3;
         p.total_mass_kg = self.total_mass_kg;
         p.body_height_m = self.body_height_m;
+        p.body_com_m = self.body_com_m.unwrap_or(p.body_com_m);
         p.hip_x_m = self.hip_x_m.unwrap_or(p.hip_x_m);
-        p.hip_y_m = self.hip_y_m;
+        p.hip_y_m = self.hip_y_m.unwrap_or(p.hip_y_m);
         p.hip_z_m = self.hip_z_m;
         p.with_curvature(if self.reversed { -1.0 } else { self.curvature })
     }
@@ -97,6 +103,14 @@ fn three_numbers(text: &str) -> Result<[f64; 3], String> {
     numbers
         .try_into()
         .map_err(|n: Vec<f64>| format!("3 comma-separated numbers needed, got {}", n.len()))
+}
+
+/// Parses `a` (the same for all three) or `a,b,c`.
+fn one_or_three_numbers(text: &str) -> Result<[f64; 3], String> {
+    match text.trim().parse::<f64>() {
+        Ok(one) => Ok([one; 3]),
+        Err(_) => three_numbers(text),
+    }
 }
 
 /// Runs `sandstep urdf`: writes the URDF and mesh, prints what was written.

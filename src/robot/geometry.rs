@@ -30,9 +30,9 @@ pub const ASSUMED_BODY_HEIGHT_M: f64 = 0.025;
 /// the centre of mass inside its support triangle only while the foot offset is below half
 /// the hip spacing, so wider is steadier (docs/robot.md, "Rigid-ground stability").
 pub const ASSUMED_HIP_X_M: [f64; 3] = [0.06, 0.0, -0.06];
-/// Distance of each leg's mid-plane from the body's mid-plane (m). Not published: half the
-/// belly width, a 10 mm hub, and half the leg width.
-pub const ASSUMED_HIP_Y_M: f64 = 0.025;
+/// Distance of each leg's mid-plane from the body's mid-plane, front, middle, rear (m). Not
+/// published: half the belly width, a 10 mm hub, and half the leg width.
+pub const ASSUMED_HIP_Y_M: [f64; 3] = [0.025; 3];
 /// Height of the hip axes above the body's centre (m). Not published; 2.25 cm above the
 /// belly, so that the belly just skims the ground when both tripods' C-legs lie flat (hips
 /// R + t/2 = 2.2 cm up) and carries the body through the hand-over between tripods.
@@ -437,10 +437,15 @@ pub struct HexapodParams {
     pub body_height_m: f64,
     /// Total mass, legs included (kg); the body gets what the legs leave. Default 0.085.
     pub total_mass_kg: f64,
+    /// The body's centre of mass relative to the centre of its box (m), inside the box; its
+    /// inertia stays the uniform box's, about that point. Default [0, 0, 0] (assumed: a
+    /// uniform body).
+    pub body_com_m: [f64; 3],
     /// Hip x positions in the body frame, front, middle, rear (m). Default [0.06, 0, -0.06].
     pub hip_x_m: [f64; 3],
-    /// Lateral distance of each leg's mid-plane from the body's mid-plane (m). Default 0.025.
-    pub hip_y_m: f64,
+    /// Lateral distance of each leg's mid-plane from the body's mid-plane, front, middle, rear
+    /// (m). Default [0.025; 3].
+    pub hip_y_m: [f64; 3],
     /// Height of the hip axes above the body's centre (m). Default 0.01.
     pub hip_z_m: f64,
     /// Straight pieces of the visual leg mesh. Default 48.
@@ -457,6 +462,7 @@ impl Default for HexapodParams {
             body_width_m: PUBLISHED_BODY_WIDTH_M,
             body_height_m: ASSUMED_BODY_HEIGHT_M,
             total_mass_kg: PUBLISHED_TOTAL_MASS_KG,
+            body_com_m: [0.0; 3],
             hip_x_m: ASSUMED_HIP_X_M,
             hip_y_m: ASSUMED_HIP_Y_M,
             hip_z_m: ASSUMED_HIP_Z_M,
@@ -486,7 +492,8 @@ impl HexapodParams {
         self.total_mass_kg - LEG_COUNT as f64 * self.legs.mass_kg()
     }
 
-    /// Body mass properties: a uniform box centred on the body frame's origin.
+    /// Body mass properties: the inertia of a uniform box of the body's size, about the centre
+    /// of mass `body_com_m` (the box's centre, the body frame's origin, by default).
     pub fn body_mass_properties(&self) -> MassProperties {
         let m = self.body_mass_kg();
         let (a, b, c) = (self.body_length_m, self.body_width_m, self.body_height_m);
@@ -496,7 +503,7 @@ impl HexapodParams {
         inertia[2][2] = m * (a * a + b * b) / 12.0;
         MassProperties {
             mass_kg: m,
-            com_m: [0.0; 3],
+            com_m: self.body_com_m,
             inertia_kg_m2: inertia,
         }
     }
@@ -504,8 +511,8 @@ impl HexapodParams {
     /// Hip (joint origin) of a leg in the body frame (m).
     pub fn hip_position_m(&self, leg: &Leg) -> [f64; 3] {
         let y = match leg.side {
-            Side::Left => self.hip_y_m,
-            Side::Right => -self.hip_y_m,
+            Side::Left => self.hip_y_m[leg.row],
+            Side::Right => -self.hip_y_m[leg.row],
         };
         [self.hip_x_m[leg.row], y, self.hip_z_m]
     }
@@ -518,7 +525,6 @@ impl HexapodParams {
             ("body_width_m", self.body_width_m),
             ("body_height_m", self.body_height_m),
             ("total_mass_kg", self.total_mass_kg),
-            ("hip_y_m", self.hip_y_m),
         ] {
             if !(value.is_finite() && value > 0.0) {
                 return Err((name, value, "must be a positive number".into()));
@@ -527,16 +533,33 @@ impl HexapodParams {
         if let Some(x) = self.hip_x_m.iter().find(|x| !x.is_finite()) {
             return Err(("hip_x_m", *x, "hip positions must be finite".into()));
         }
+        let half_box = [self.body_length_m, self.body_width_m, self.body_height_m].map(|a| a / 2.0);
+        if let Some((c, _)) = self
+            .body_com_m
+            .iter()
+            .zip(half_box)
+            .find(|(c, half)| !(c.is_finite() && c.abs() <= *half))
+        {
+            return Err((
+                "body_com_m",
+                *c,
+                "must lie inside the body's box (each coordinate within half its size)".into(),
+            ));
+        }
         if !self.hip_z_m.is_finite() {
             return Err(("hip_z_m", self.hip_z_m, "must be finite".into()));
         }
         // Closer in, a leg's inner face would lie inside the belly (the robot does not
         // collide with itself).
         let flush_m = (self.body_width_m + self.legs.width_m) / 2.0;
-        if self.hip_y_m < flush_m {
+        if let Some(y) = self
+            .hip_y_m
+            .iter()
+            .find(|y| !(y.is_finite() && **y >= flush_m))
+        {
             return Err((
                 "hip_y_m",
-                self.hip_y_m,
+                *y,
                 format!(
                     "must be at least {flush_m} m (half the body's and a leg's widths): a \
                      leg would cut into the belly"
@@ -848,17 +871,25 @@ mod tests {
         let (inside, flush) = (0.014, 0.015);
         assert_eq!(
             named(HexapodParams {
-                hip_y_m: inside,
+                hip_y_m: [flush, inside, flush],
                 ..d()
             }),
             Some("hip_y_m")
         );
         assert_eq!(
             named(HexapodParams {
-                hip_y_m: flush,
+                hip_y_m: [flush; 3],
                 ..d()
             }),
             None
+        );
+        // The body's box is 2.5 cm tall: its centre of mass may sit 1.25 cm below its centre.
+        let body_com_m = [0.0, 0.0, -0.0125];
+        assert_eq!(named(HexapodParams { body_com_m, ..d() }), None);
+        let body_com_m = [0.0, 0.0, -0.013];
+        assert_eq!(
+            named(HexapodParams { body_com_m, ..d() }),
+            Some("body_com_m")
         );
         assert!(HexapodParams::default().validate().is_ok());
         assert!(HexapodParams::reversed().validate().is_ok());
