@@ -254,9 +254,11 @@ fn urdf_command_places_the_hips_it_is_given() {
     };
     let close = |a: [f64; 3], b: [f64; 3]| a.iter().zip(b).all(|(a, b)| (a - b).abs() < 1e-9);
     for (joint, expected) in [
-        ("leg_front_left_joint", [0.05, 0.03, -0.004]),
-        ("leg_middle_right_joint", [0.001, -0.035, -0.004]),
-        ("leg_rear_left_joint", [-0.055, 0.03, -0.004]),
+        // Hips given from the box's centre; the body's frame is its centre of mass, 1 cm ahead
+        // of and 5 mm below the box's centre.
+        ("leg_front_left_joint", [0.04, 0.03, 0.001]),
+        ("leg_middle_right_joint", [-0.009, -0.035, 0.001]),
+        ("leg_rear_left_joint", [-0.065, 0.03, 0.001]),
     ] {
         assert!(
             close(origin(joint), expected),
@@ -269,12 +271,16 @@ fn urdf_command_places_the_hips_it_is_given() {
         Geometry::Box { size } => assert!((size.0[2] - 0.02).abs() < 1e-9, "{:?}", size.0),
         other => panic!("body collision is {other:?}"),
     }
-    // The body's centre of mass goes where the option puts it.
-    let inertial = &body.inertial;
-    let com = inertial.origin.xyz.0;
+    // The body's frame is at its centre of mass; the box sits around it as the option says.
+    let com = body.inertial.origin.xyz.0;
     assert!(
-        close(com, [0.01, 0.0, -0.005]),
-        "body centre of mass {com:?}"
+        close(com, [0.0; 3]),
+        "body centre of mass {com:?} off its frame"
+    );
+    let box_centre = body.collision[0].origin.xyz.0;
+    assert!(
+        close(box_centre, [-0.01, 0.0, 0.005]),
+        "body box at {box_centre:?}"
     );
     let out = urdf(&["--hip-x-m=0.05,0.0"]);
     assert!(!out.status.success());

@@ -43,7 +43,8 @@ pub struct UrdfArgs {
     #[arg(long, default_value_t = HexapodParams::default().body_height_m)]
     pub body_height_m: f64,
     /// The body's centre of mass relative to the centre of its box, x,y,z (m; assumed), inside
-    /// the box; the inertia stays the uniform box's. Default 0,0,0.
+    /// the box; the inertia stays the uniform box's. The body's frame (the pose a run reports)
+    /// is put there. Default 0,0,0.
     #[arg(long, value_parser = three_numbers, allow_hyphen_values = true, value_name = "X,Y,Z")]
     pub body_com_m: Option<[f64; 3]>,
     /// Hip x positions in the body frame, front, middle, rear (m; assumed): three
@@ -57,7 +58,12 @@ pub struct UrdfArgs {
     pub hip_x_m: Option<[f64; 3]>,
     /// Lateral distance of each leg's mid-plane from the body's mid-plane (m; assumed): one
     /// value for all legs, or front,middle,rear. Default: the assumed layout of docs/robot.md.
-    #[arg(long, value_parser = one_or_three_numbers, value_name = "Y | FRONT,MIDDLE,REAR")]
+    #[arg(
+        long,
+        value_parser = one_or_three_numbers,
+        allow_hyphen_values = true,
+        value_name = "Y|FRONT,MIDDLE,REAR"
+    )]
     pub hip_y_m: Option<[f64; 3]>,
     /// Height of the hip axes above the body's centre (m; assumed), negative below it.
     #[arg(long, default_value_t = HexapodParams::default().hip_z_m, allow_negative_numbers = true)]
@@ -109,7 +115,9 @@ fn three_numbers(text: &str) -> Result<[f64; 3], String> {
 fn one_or_three_numbers(text: &str) -> Result<[f64; 3], String> {
     match text.trim().parse::<f64>() {
         Ok(one) => Ok([one; 3]),
-        Err(_) => three_numbers(text),
+        Err(_) if text.contains(',') => three_numbers(text)
+            .map_err(|_| format!("1 or 3 comma-separated numbers needed, got {text:?}")),
+        Err(e) => Err(e.to_string()),
     }
 }
 
@@ -184,5 +192,26 @@ mod tests {
         assert_eq!(p.hip_x_m, [0.07, 0.01, -0.07]);
         assert!(parse(&["--hip-x-m", "0.05,0"]).is_err());
         assert!(parse(&["--hip-x-m", "0.05,x,0"]).is_err());
+    }
+
+    #[test]
+    fn hip_y_takes_one_or_three_numbers_and_the_centre_of_mass_three() {
+        let p = parse(&["--hip-y-m", "0.03"]).unwrap().params();
+        assert_eq!(p.hip_y_m, [0.03; 3]);
+        let p = parse(&["--hip-y-m", "0.024,0.035,0.024"]).unwrap().params();
+        assert_eq!(p.hip_y_m, [0.024, 0.035, 0.024]);
+        let two = parse(&["--hip-y-m", "0.03,0.04"])
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(two.contains("1 or 3"), "{two}");
+        // Negative values parse (and are then refused by the check that names hip_y_m).
+        assert_eq!(
+            parse(&["--hip-y-m", "-0.03"]).unwrap().params().hip_y_m,
+            [-0.03; 3]
+        );
+        let p = parse(&["--body-com-m", "-0.01,0,-0.005"]).unwrap().params();
+        assert_eq!(p.body_com_m, [-0.01, 0.0, -0.005]);
+        assert!(parse(&["--body-com-m", "0.01"]).is_err());
     }
 }

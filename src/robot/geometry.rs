@@ -438,8 +438,8 @@ pub struct HexapodParams {
     /// Total mass, legs included (kg); the body gets what the legs leave. Default 0.085.
     pub total_mass_kg: f64,
     /// The body's centre of mass relative to the centre of its box (m), inside the box; its
-    /// inertia stays the uniform box's, about that point. Default [0, 0, 0] (assumed: a
-    /// uniform body).
+    /// inertia stays the uniform box's, about that point. The body's frame (`base_link`, the
+    /// pose a run reports) is at this point. Default [0, 0, 0] (assumed: a uniform body).
     pub body_com_m: [f64; 3],
     /// Hip x positions in the body frame, front, middle, rear (m). Default [0.06, 0, -0.06].
     pub hip_x_m: [f64; 3],
@@ -492,8 +492,9 @@ impl HexapodParams {
         self.total_mass_kg - LEG_COUNT as f64 * self.legs.mass_kg()
     }
 
-    /// Body mass properties: the inertia of a uniform box of the body's size, about the centre
-    /// of mass `body_com_m` (the box's centre, the body frame's origin, by default).
+    /// Body mass properties in the body's frame, whose origin is the body's centre of mass
+    /// (`body_com_m` from the box's centre; the URDF places the box and the hips around it):
+    /// the inertia of a uniform box of the body's size about that point.
     pub fn body_mass_properties(&self) -> MassProperties {
         let m = self.body_mass_kg();
         let (a, b, c) = (self.body_length_m, self.body_width_m, self.body_height_m);
@@ -503,12 +504,13 @@ impl HexapodParams {
         inertia[2][2] = m * (a * a + b * b) / 12.0;
         MassProperties {
             mass_kg: m,
-            com_m: self.body_com_m,
+            com_m: [0.0; 3],
             inertia_kg_m2: inertia,
         }
     }
 
-    /// Hip (joint origin) of a leg in the body frame (m).
+    /// Hip of a leg from the centre of the body's box (m); the URDF's joint origin is this
+    /// less `body_com_m`.
     pub fn hip_position_m(&self, leg: &Leg) -> [f64; 3] {
         let y = match leg.side {
             Side::Left => self.hip_y_m[leg.row],

@@ -108,15 +108,29 @@ pub fn hexapod_urdf_text(params: &HexapodParams, name: &str, mesh_file: &str) ->
         num(params.body_width_m),
         num(params.body_height_m)
     );
+    // The body's frame is at its centre of mass, so the box (and every hip) sits at minus
+    // `body_com_m` from it: rapier's multibody root moves its frame as its centre of mass (a
+    // root whose centre of mass is off its frame does not conserve momentum, docs/robot.md).
+    let frame = params.body_com_m;
+    let box_origin = if frame == [0.0; 3] {
+        String::new()
+    } else {
+        format!(
+            r#"<origin xyz="{} {} {}" rpy="0 0 0"/>"#,
+            num(-frame[0]),
+            num(-frame[1]),
+            num(-frame[2])
+        )
+    };
     let _ = writeln!(s, r#"  <link name="{BODY_LINK}">"#);
     write_inertial(&mut s, &body);
     let _ = writeln!(
         s,
-        r#"    <visual><geometry>{body_box}</geometry><material name="body_grey"/></visual>"#
+        r#"    <visual>{box_origin}<geometry>{body_box}</geometry><material name="body_grey"/></visual>"#
     );
     let _ = writeln!(
         s,
-        r#"    <collision><geometry>{body_box}</geometry></collision>"#
+        r#"    <collision>{box_origin}<geometry>{body_box}</geometry></collision>"#
     );
     let _ = writeln!(s, "  </link>");
 
@@ -153,9 +167,9 @@ pub fn hexapod_urdf_text(params: &HexapodParams, name: &str, mesh_file: &str) ->
         let _ = writeln!(
             s,
             r#"    <origin xyz="{} {} {}" rpy="0 0 0"/>"#,
-            num(hip[0]),
-            num(hip[1]),
-            num(hip[2])
+            num(hip[0] - frame[0]),
+            num(hip[1] - frame[1]),
+            num(hip[2] - frame[2])
         );
         let _ = writeln!(s, r#"    <axis xyz="0 1 0"/>"#);
         let _ = writeln!(s, "  </joint>");
