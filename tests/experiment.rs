@@ -400,7 +400,10 @@ fn resume_keeps_finished_runs_and_runs_the_rest() {
         String::from_utf8_lossy(&first.stderr)
     );
     let first: Value = serde_json::from_slice(&first.stdout).unwrap();
-    // The second run "failed" (say, the machine went down): its row says so, its bag is partial.
+    // The second run "failed" (say, the machine went down): its row says so, its bag is
+    // partial, and it left no record of its own (`runs/<name>.json`).
+    let second_name = first["runs"][1]["run"].as_str().unwrap();
+    std::fs::remove_file(out.join("runs").join(format!("{second_name}.json"))).unwrap();
     let json_path = out.join("results.json");
     let mut recorded: Value =
         serde_json::from_str(&std::fs::read_to_string(&json_path).unwrap()).unwrap();
@@ -427,7 +430,16 @@ fn resume_keeps_finished_runs_and_runs_the_rest() {
         "RFT runs are deterministic"
     );
 
-    // Different settings: refused, naming the results file.
+    // Different settings: refused, naming a run's record and what differs ...
+    let other = experiment(&["--resume", "--set", "cycles=2"]);
+    let stderr = String::from_utf8_lossy(&other.stderr);
+    assert!(!other.status.success());
+    assert!(
+        stderr.contains("holds a result of other settings (cycles: recorded 1, now 2)"),
+        "{stderr}"
+    );
+    // ... or, in a folder of a build that wrote no records, the results file.
+    std::fs::remove_dir_all(out.join("runs")).unwrap();
     let other = experiment(&["--resume", "--set", "cycles=2"]);
     let stderr = String::from_utf8_lossy(&other.stderr);
     assert!(!other.status.success());

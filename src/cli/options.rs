@@ -1,5 +1,5 @@
 //! The options several commands share, defined once: worker threads, `--set` overrides,
-//! `--json`, `--duration` and the bag.
+//! `--json`, `--duration`, the bag, and a study's runs spread over jobs.
 
 use std::path::{Path, PathBuf};
 
@@ -23,6 +23,39 @@ impl MemoryLimit {
             crate::scene::memory::limit_to(gb * crate::scene::memory::BYTES_PER_GB);
         }
         Ok(())
+    }
+}
+
+/// `--list`, `--shard I/N`, `--run NAME`, `--merge`: a study's runs as independent jobs
+/// (`docs/cluster.md`, [`crate::shard`]).
+#[derive(clap::Args, Debug, Clone)]
+pub struct Jobs {
+    /// Print the names of the runs (a sweep's settings: study/setting), one per line, and
+    /// exit; `--list | wc -l` sizes a job array.
+    #[arg(long, conflicts_with_all = ["shard", "runs", "merge", "out"])]
+    pub list: bool,
+    /// Run shard I of N (I from 1, runs dealt round robin) into the shared --out folder, each
+    /// run's result in a file of its own; --merge then writes the results.
+    #[arg(long, value_name = "I/N", requires = "out", conflicts_with = "runs")]
+    pub shard: Option<crate::shard::Shard>,
+    /// Run only the run of this name (repeatable; names from --list) into --out, as a shard.
+    #[arg(long = "run", value_name = "NAME", requires = "out")]
+    pub runs: Vec<String>,
+    /// Merge the runs' results that shards left in --out into the study's results (as one
+    /// process writes them), then print them.
+    #[arg(long, requires = "out", conflicts_with_all = ["shard", "runs"])]
+    pub merge: bool,
+}
+
+impl Jobs {
+    /// The runs this process runs.
+    pub fn selection(&self) -> crate::shard::Selection {
+        use crate::shard::Selection;
+        match (&self.shard, self.runs.is_empty()) {
+            (Some(shard), _) => Selection::Shard(*shard),
+            (None, false) => Selection::Named(self.runs.clone()),
+            (None, true) => Selection::All,
+        }
     }
 }
 

@@ -3,11 +3,13 @@
 
 use std::path::PathBuf;
 
-use super::options::{Json, MemoryLimit, Overrides, Threads};
+use super::options::{Jobs, Json, MemoryLimit, Overrides, Threads};
 use super::progress::Bars;
 use super::stop::stop_flag;
-use crate::experiment::{report_table, run_experiment, Experiment, ExperimentOptions};
-use crate::sweep::{run_sweep, Sweep, SweepOptions};
+use crate::experiment::{
+    merge_experiment, report_table, run_experiment, Experiment, ExperimentOptions,
+};
+use crate::sweep::{merge_sweep, run_sweep, Sweep, SweepOptions};
 
 /// `sandstep experiment`.
 #[derive(clap::Args)]
@@ -25,9 +27,12 @@ pub struct ExperimentArgs {
     overrides: Overrides,
     #[command(flatten)]
     json: Json,
-    /// Continue the experiment in --out: keep its finished runs, run the rest.
-    #[arg(long, requires = "out")]
+    /// Continue the experiment in --out: keep its finished runs, run the rest (with --shard
+    /// or --run: of those runs).
+    #[arg(long, requires = "out", conflicts_with = "merge")]
     resume: bool,
+    #[command(flatten)]
+    jobs: Jobs,
 }
 
 /// `sandstep sweep`.
@@ -47,30 +52,50 @@ pub struct SweepArgs {
     studies: Vec<String>,
     #[command(flatten)]
     json: Json,
+    #[command(flatten)]
+    jobs: Jobs,
 }
 
-/// Runs the experiment, prints its table (or `results.json` with `--json`), and fails if a
-/// run failed.
+/// Runs the experiment (or lists, runs a shard of or merges its runs), prints its table (or
+/// `results.json` with `--json`), and fails if a run failed.
 pub fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
-    let stop = stop_flag()?;
-    args.threads.apply()?;
-    args.memory.apply()?;
     let experiment = Experiment::load(&args.experiment, &args.overrides.overrides)?;
-    let opts = ExperimentOptions {
-        out_dir: args.out,
-        progress: Bars::progress(args.json.show_progress()),
-        stop: Some(stop),
-        resume: args.resume,
+    if args.jobs.list {
+        experiment
+            .runs()
+            .iter()
+            .for_each(|run| println!("{}", run.name));
+        return Ok(());
+    }
+    let report = match (&args.out, args.jobs.merge) {
+        (Some(out), true) => merge_experiment(&experiment, out)?,
+        _ => {
+            let stop = stop_flag()?;
+            args.threads.apply()?;
+            args.memory.apply()?;
+            let opts = ExperimentOptions {
+                out_dir: args.out,
+                progress: Bars::progress(args.json.show_progress()),
+                stop: Some(stop),
+                resume: args.resume,
+                select: args.jobs.selection(),
+            };
+            run_experiment(&experiment, &opts)?
+        }
     };
-    let report = run_experiment(&experiment, &opts)?;
     if args.json.json {
         println!("{}", serde_json::to_string(&report)?);
     } else {
         print!("{}", report_table(&report));
     }
+    let table = if args.jobs.selection().is_all() {
+        crate::experiment::RESULTS_CSV
+    } else {
+        crate::experiment::RUNS_DIR
+    };
     anyhow::ensure!(
         report.failed == 0,
-        "{} of {} runs failed (see {}/results.csv)",
+        "{} of {} runs failed (see {}/{table})",
         report.failed,
         report.runs.len(),
         report.out_dir
@@ -78,18 +103,29 @@ pub fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Runs the sweep's settings and prints its table (or `results.json` with `--json`).
+/// Runs the sweep's settings (or lists, runs a shard of or merges them) and prints its table
+/// (or `results.json` with `--json`).
 pub fn sweep(args: SweepArgs) -> anyhow::Result<()> {
-    let stop = stop_flag()?;
-    args.threads.apply()?;
-    args.memory.apply()?;
     let sweep = Sweep::load(&args.sweep)?.only_studies(&args.studies)?;
-    let opts = SweepOptions {
-        out_dir: args.out,
-        progress: Bars::progress(args.json.show_progress()),
-        stop: Some(stop),
+    if args.jobs.list {
+        sweep.labels().iter().for_each(|label| println!("{label}"));
+        return Ok(());
+    }
+    let report = match (&args.out, args.jobs.merge) {
+        (Some(out), true) => merge_sweep(&sweep, out)?,
+        _ => {
+            let stop = stop_flag()?;
+            args.threads.apply()?;
+            args.memory.apply()?;
+            let opts = SweepOptions {
+                out_dir: args.out,
+                progress: Bars::progress(args.json.show_progress()),
+                stop: Some(stop),
+                select: args.jobs.selection(),
+            };
+            run_sweep(&sweep, &opts)?
+        }
     };
-    let report = run_sweep(&sweep, &opts)?;
     if args.json.json {
         println!("{}", serde_json::to_string(&report)?);
     } else {

@@ -6,7 +6,9 @@
 //! `sandstep run` ([`crate::ros::record_run`]); its bag is analysed after settling
 //! ([`crate::analysis::bag::analyze_bag_with`]). Results go to `results.csv` (a row per run),
 //! `summary.csv` (a row per curvature, frequency and model, pooling the starts), `results.json`
-//! and a chart; a failed run is recorded and the others go on.
+//! and a chart; a failed run is recorded and the others go on. Every run also leaves a record
+//! of its own in `runs/`, so the runs can be spread over a cluster's jobs and merged
+//! ([`crate::shard`], [`merge_experiment`]).
 
 pub mod charts;
 pub mod config;
@@ -34,6 +36,7 @@ use crate::analysis::plots::PlotError;
 use crate::progress::Progress;
 use crate::robot::RobotMetrics;
 use crate::scene::{Observer, RunOptions, Scene, SceneError, Simulation};
+use crate::shard::{local_time_now, MergeError, Selection, UnitRecord};
 
 /// Parent of the default output folders.
 pub const DEFAULT_OUT_PARENT: &str = "out/experiments";
@@ -47,6 +50,8 @@ pub const SUMMARY_CSV: &str = "summary.csv";
 pub const URDF_DIR: &str = "urdf";
 /// Each run's bag: `<out>/bags/<run name>/`.
 pub const BAGS_DIR: &str = "bags";
+/// Each run's record: `<out>/runs/<run name>.json` ([`RunRecord`]).
+pub const RUNS_DIR: &str = "runs";
 /// Largest difference between a run's simulated robot mass and `robot_total_mass_kg` (kg):
 /// rapier keeps masses in f32.
 pub const MASS_TOLERANCE_KG: f64 = 1e-6;
@@ -56,7 +61,7 @@ pub const MASS_TOLERANCE_KG: f64 = 1e-6;
 pub enum ExperimentError {
     #[error(transparent)]
     Config(#[from] crate::config_error::ConfigError),
-    #[error("generating the robot with curvature {curvature_per_r}: {source}")]
+    #[error("generating the robot with curvature {curvature_per_r}")]
     Urdf {
         curvature_per_r: f64,
         source: crate::robot::RobotError,
@@ -65,7 +70,23 @@ pub enum ExperimentError {
     Plot(#[from] PlotError),
     #[error("cannot resume from {}: {message}", path.display())]
     Resume { path: PathBuf, message: String },
+    #[error(transparent)]
+    Select(#[from] crate::shard::UnknownRun),
+    #[error(
+        "{} holds the bag of an earlier attempt at run {run}: --resume keeps the runs it \
+         finished and runs the rest; or choose another --out",
+        bag.display()
+    )]
+    AlreadyRun { run: String, bag: PathBuf },
+    #[error(transparent)]
+    Records(#[from] MergeError),
 }
+
+/// The status of a run not started because the experiment was stopped.
+const STOPPED_BEFORE_START: &str = "not run: the experiment was stopped";
+
+/// What a run leaves in `runs/` for a merge.
+pub type RunRecord = UnitRecord<ExperimentConfig, RunResult>;
 
 /// How to run an experiment.
 #[derive(Clone, Debug, Default)]
@@ -80,7 +101,11 @@ pub struct ExperimentOptions {
     /// Continue the experiment in `out_dir` (which must be given): runs whose `results.json`
     /// status there is `ok` and whose bag is present are kept, the others are run again
     /// (their partial bags replaced). The experiment's settings must equal those recorded.
+    /// With a [`Selection`] other than all, the runs' records in `runs/` say what is kept.
     pub resume: bool,
+    /// The runs to run: all (and the experiment's results written), or a shard or named runs
+    /// (only their records written, for [`merge_experiment`]).
+    pub select: Selection,
 }
 
 /// What an experiment did: `results.json`.
@@ -121,6 +146,11 @@ pub fn default_out_dir(name: &str) -> PathBuf {
     crate::ros::default_bag_dir(Path::new(DEFAULT_OUT_PARENT), name)
 }
 
+/// The record of run `name` under `out`: `runs/<name>.json`.
+pub fn record_path(out: &Path, name: &str) -> PathBuf {
+    out.join(RUNS_DIR).join(format!("{name}.json"))
+}
+
 /// The folder of the robot with legs of `curvature_per_r` under `out`: `urdf/k<curvature>`.
 pub fn urdf_path(out: &Path, curvature_per_r: f64) -> PathBuf {
     out.join(URDF_DIR)
@@ -128,9 +158,10 @@ pub fn urdf_path(out: &Path, curvature_per_r: f64) -> PathBuf {
         .join("hexapod.urdf")
 }
 
-/// Runs every run of `experiment`, writing URDFs, bags, `results.csv`, `summary.csv`,
-/// `results.json` (after every run, so a crash keeps what was done) and the chart into the
-/// output folder.
+/// Runs the selected runs of `experiment` ([`ExperimentOptions::select`]), writing URDFs,
+/// bags and each run's record (`runs/<name>.json`) into the output folder. With every run
+/// selected it also writes `results.csv`, `summary.csv`, `results.json` (after every run, so a
+/// crash keeps what was done) and the chart; a shard leaves those to [`merge_experiment`].
 pub fn run_experiment(
     experiment: &Experiment,
     opts: &ExperimentOptions,
@@ -140,12 +171,37 @@ pub fn run_experiment(
         .out_dir
         .clone()
         .unwrap_or_else(|| default_out_dir(&cfg.name));
-    let write_error = |path: &Path| {
-        let path = path.to_path_buf();
-        move |source| ExperimentError::from(crate::config_error::ConfigError::write(&path, source))
+    let all_runs = experiment.runs();
+    let names: Vec<&str> = all_runs.iter().map(|r| r.name.as_str()).collect();
+    let picked = opts.select.pick(&names)?;
+    let runs: Vec<&RunSpec> = all_runs
+        .iter()
+        .zip(picked)
+        .filter_map(|(run, picked)| picked.then_some(run))
+        .collect();
+    if !opts.resume {
+        // Bags are never overwritten: refuse before running anything, not run by run.
+        for spec in &runs {
+            let bag = out.join(BAGS_DIR).join(&spec.name);
+            if std::fs::read_dir(&bag).is_ok_and(|mut entries| entries.next().is_some()) {
+                return Err(ExperimentError::AlreadyRun {
+                    run: spec.name.clone(),
+                    bag,
+                });
+            }
+        }
+    }
+    let mut kept = if opts.resume {
+        resumable_runs(&out, cfg, &runs, opts.select.is_all())?
+    } else {
+        Vec::new()
     };
     std::fs::create_dir_all(&out).map_err(write_error(&out))?;
+    // The robots of the runs to run (shards in one folder write the same bytes: kept as is).
     for &k in &cfg.curvatures_per_r {
+        if !runs.iter().any(|r| r.curvature_per_r == k) {
+            continue;
+        }
         let urdf = urdf_path(&out, k);
         crate::robot::write_hexapod_urdf(&experiment.robot_params(k), &urdf).map_err(|source| {
             ExperimentError::Urdf {
@@ -154,47 +210,8 @@ pub fn run_experiment(
             }
         })?;
     }
-
-    let csv_path = out.join(RESULTS_CSV);
-    let json_path = out.join(RESULTS_JSON);
-    let summary_path = out.join(SUMMARY_CSV);
-    let mut kept = if opts.resume {
-        finished_runs(&json_path, cfg)?
-    } else {
-        Vec::new()
-    };
-    let runs = experiment.runs();
-    let mut report = ExperimentReport {
-        experiment: cfg.name.clone(),
-        file: experiment.file.display().to_string(),
-        config: cfg.clone(),
-        measure_from_s: cfg
-            .frequencies_hz
-            .iter()
-            .map(|&f| experiment.measure_from_s(f))
-            .collect(),
-        run_duration_s: cfg
-            .frequencies_hz
-            .iter()
-            .map(|&f| experiment.run_duration_s(f))
-            .collect(),
-        out_dir: out.display().to_string(),
-        started: chrono::Local::now().format("%Y-%m-%d %H:%M:%S").to_string(),
-        threads: rayon::current_num_threads(),
-        runs: Vec::with_capacity(runs.len()),
-        cells: Vec::new(),
-        failed: 0,
-        wall_time_s: 0.0,
-        files: Vec::new(),
-    };
-    let write_results = |report: &mut ExperimentReport| -> Result<(), ExperimentError> {
-        write_results_csv(&csv_path, &report.runs).map_err(write_error(&csv_path))?;
-        report.cells = summarize(&report.runs);
-        std::fs::write(&summary_path, summary_csv(&report.cells))
-            .map_err(write_error(&summary_path))?;
-        let json = serde_json::to_string_pretty(report).expect("plain data");
-        std::fs::write(&json_path, json + "\n").map_err(write_error(&json_path))
-    };
+    let threads = rayon::current_num_threads();
+    let mut report = blank_report(experiment, &out, local_time_now(), threads);
 
     let durations_s: Vec<f64> = runs.iter().map(|r| r.duration_s).collect();
     let progress = &opts.progress;
@@ -205,43 +222,149 @@ pub fn run_experiment(
             .as_ref()
             .is_some_and(|s| s.load(Ordering::Relaxed))
     };
-    for spec in &runs {
-        let previous = kept.iter().position(|r| r.run == spec.name);
-        let result = if let Some(i) = previous {
+    for spec in runs {
+        let previous = kept.iter().position(|r| r.result.run == spec.name);
+        let record = if let Some(i) = previous {
             progress.skip_run(
                 spec.duration_s,
                 &format!("{}: kept from the earlier attempt", spec.name),
             );
             kept.swap_remove(i)
-        } else if stopped() {
-            not_run(spec, "not run: the experiment was stopped")
         } else {
-            let bag = out.join(BAGS_DIR).join(&spec.name);
-            if opts.resume && bag.exists() {
-                // A failed or interrupted run of the earlier attempt: run it again.
-                std::fs::remove_dir_all(&bag).map_err(write_error(&bag))?;
+            let started = local_time_now();
+            let result = if stopped() {
+                not_run(spec, STOPPED_BEFORE_START)
+            } else {
+                let bag = out.join(BAGS_DIR).join(&spec.name);
+                if opts.resume && bag.exists() {
+                    // A failed or interrupted run of the earlier attempt: run it again.
+                    std::fs::remove_dir_all(&bag).map_err(write_error(&bag))?;
+                }
+                progress.start_run(&spec.name, Some(spec.duration_s));
+                let result = run_one(experiment, spec, &out, opts);
+                progress.finish_run(spec.duration_s, &finish_line(spec, &result));
+                result
+            };
+            RunRecord {
+                config: cfg.clone(),
+                started,
+                threads,
+                result,
             }
-            progress.start_run(&spec.name, Some(spec.duration_s));
-            let result = run_one(experiment, spec, &out, opts);
-            progress.finish_run(spec.duration_s, &finish_line(spec, &result));
-            result
         };
-        report.failed += usize::from(!result.is_ok());
-        report.runs.push(result);
+        let record_file = record_path(&out, &spec.name);
+        if record.result.is_ok() || !stopped() {
+            // A run stopped (or never started) by a signal leaves no record: a merge names it
+            // as missing, and a resume runs it.
+            crate::shard::write_record(&record_file, &record).map_err(write_error(&record_file))?;
+        }
+        report.failed += usize::from(!record.result.is_ok());
+        report.runs.push(record.result);
         report.wall_time_s = wall.elapsed().as_secs_f64();
-        write_results(&mut report)?;
+        if opts.select.is_all() {
+            write_tables(&mut report, &out)?;
+        } else {
+            report.files.push(record_file.display().to_string());
+        }
     }
     progress.done();
 
-    let charts = write_speed_chart(&report.runs, &cfg.terrain_models, &cfg.frequencies_hz, &out)?;
-    report.files = [csv_path.clone(), summary_path.clone(), json_path.clone()]
+    report.cells = summarize(&report.runs);
+    if opts.select.is_all() {
+        write_final(&mut report, &out)?;
+    }
+    Ok(report)
+}
+
+/// Merges the records that the shards of `experiment` left in `out` (`runs/`) into the
+/// experiment's results, as [`run_experiment`] writes them for all its runs in one process;
+/// an error names the runs without a record. The report's wall time is the sum of the runs'.
+pub fn merge_experiment(
+    experiment: &Experiment,
+    out: &Path,
+) -> Result<ExperimentReport, ExperimentError> {
+    let units: Vec<(String, PathBuf)> = experiment
+        .runs()
+        .into_iter()
+        .map(|r| {
+            let path = record_path(out, &r.name);
+            (r.name, path)
+        })
+        .collect();
+    let records: Vec<RunRecord> =
+        crate::shard::read_all_records(out, "runs", &units, &experiment.config)?;
+    let started = crate::shard::earliest_start(&records);
+    let threads = crate::shard::most_threads(&records);
+    let mut report = blank_report(experiment, out, started, threads);
+    report.runs = records.into_iter().map(|r| r.result).collect();
+    report.failed = report.runs.iter().filter(|r| !r.is_ok()).count();
+    report.wall_time_s = report.runs.iter().filter_map(|r| r.wall_time_s).sum();
+    report.cells = summarize(&report.runs);
+    write_final(&mut report, out)?;
+    Ok(report)
+}
+
+/// An error writing `path`.
+fn write_error(path: &Path) -> impl FnOnce(std::io::Error) -> ExperimentError {
+    let path = path.to_path_buf();
+    move |source| ExperimentError::from(crate::config_error::ConfigError::write(&path, source))
+}
+
+/// The report of `experiment` in `out` before any run.
+fn blank_report(
+    experiment: &Experiment,
+    out: &Path,
+    started: String,
+    threads: usize,
+) -> ExperimentReport {
+    let cfg = &experiment.config;
+    let per_frequency = |f: fn(&Experiment, f64) -> f64| {
+        cfg.frequencies_hz
+            .iter()
+            .map(|&hz| f(experiment, hz))
+            .collect()
+    };
+    ExperimentReport {
+        experiment: cfg.name.clone(),
+        file: experiment.file.display().to_string(),
+        config: cfg.clone(),
+        measure_from_s: per_frequency(Experiment::measure_from_s),
+        run_duration_s: per_frequency(Experiment::run_duration_s),
+        out_dir: out.display().to_string(),
+        started,
+        threads,
+        runs: Vec::new(),
+        cells: Vec::new(),
+        failed: 0,
+        wall_time_s: 0.0,
+        files: Vec::new(),
+    }
+}
+
+/// Writes `results.csv`, `summary.csv` (summarising the runs) and `results.json`.
+fn write_tables(report: &mut ExperimentReport, out: &Path) -> Result<(), ExperimentError> {
+    let csv_path = out.join(RESULTS_CSV);
+    write_results_csv(&csv_path, &report.runs).map_err(write_error(&csv_path))?;
+    report.cells = summarize(&report.runs);
+    let summary_path = out.join(SUMMARY_CSV);
+    std::fs::write(&summary_path, summary_csv(&report.cells))
+        .map_err(write_error(&summary_path))?;
+    let json_path = out.join(RESULTS_JSON);
+    let json = serde_json::to_string_pretty(report).expect("plain data");
+    std::fs::write(&json_path, json + "\n").map_err(write_error(&json_path))
+}
+
+/// Draws the chart, lists the files and writes the tables a last time.
+fn write_final(report: &mut ExperimentReport, out: &Path) -> Result<(), ExperimentError> {
+    let cfg = &report.config;
+    let charts = write_speed_chart(&report.runs, &cfg.terrain_models, &cfg.frequencies_hz, out)?;
+    report.files = [RESULTS_CSV, SUMMARY_CSV, RESULTS_JSON]
         .iter()
-        .chain(&charts)
+        .map(|name| out.join(name))
+        .chain(charts)
         .map(|p| p.display().to_string())
         .collect();
-    report.wall_time_s = wall.elapsed().as_secs_f64();
-    write_results(&mut report)?;
-    Ok(report)
+    write_tables(report, out)
 }
 
 /// The runs of an earlier attempt recorded in `json_path` that went through and whose bag is
@@ -249,7 +372,7 @@ pub fn run_experiment(
 fn finished_runs(
     json_path: &Path,
     cfg: &ExperimentConfig,
-) -> Result<Vec<RunResult>, ExperimentError> {
+) -> Result<Vec<RunRecord>, ExperimentError> {
     let fail = |message: String| ExperimentError::Resume {
         path: json_path.to_path_buf(),
         message,
@@ -267,8 +390,51 @@ fn finished_runs(
     Ok(earlier
         .runs
         .into_iter()
-        .filter(|r| r.is_ok() && Path::new(&r.bag).join("metadata.yaml").is_file())
+        .filter(has_finished)
+        .map(|result| RunRecord {
+            config: earlier.config.clone(),
+            started: earlier.started.clone(),
+            threads: earlier.threads,
+            result,
+        })
         .collect())
+}
+
+/// The runs among `runs` that an earlier attempt in `out` finished, whose bag is still there:
+/// from their records in `runs/`, and for runs without one from `results.json` (older
+/// builds wrote no records). An error if either holds a different experiment, or, with
+/// `all` runs selected, if there is neither.
+fn resumable_runs(
+    out: &Path,
+    cfg: &ExperimentConfig,
+    runs: &[&RunSpec],
+    all: bool,
+) -> Result<Vec<RunRecord>, ExperimentError> {
+    let mut kept = Vec::new();
+    let mut recorded = Vec::new();
+    for spec in runs {
+        let path = record_path(out, &spec.name);
+        let record: Option<RunRecord> = crate::shard::read_record(&path, cfg)?;
+        if let Some(record) = record {
+            recorded.push(spec.name.as_str());
+            kept.extend(has_finished(&record.result).then_some(record));
+        }
+    }
+    let json_path = out.join(RESULTS_JSON);
+    if json_path.exists() || (all && recorded.is_empty()) {
+        let wanted = |name: &str| runs.iter().any(|r| r.name == name) && !recorded.contains(&name);
+        kept.extend(
+            finished_runs(&json_path, cfg)?
+                .into_iter()
+                .filter(|r| wanted(&r.result.run)),
+        );
+    }
+    Ok(kept)
+}
+
+/// Whether a run went through and its bag is still there.
+fn has_finished(result: &RunResult) -> bool {
+    result.is_ok() && Path::new(&result.bag).join("metadata.yaml").is_file()
 }
 
 /// A row for a run that did not go through.

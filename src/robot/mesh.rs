@@ -120,9 +120,9 @@ impl TriMesh {
         out
     }
 
-    /// Writes the mesh as a binary STL file.
+    /// Writes the mesh as a binary STL file (whole or not at all: [`crate::files`]).
     pub fn write_stl(&self, path: &Path, header: &str) -> std::io::Result<()> {
-        std::fs::write(path, self.to_binary_stl(header))
+        crate::files::write_atomically(path, &self.to_binary_stl(header))
     }
 
     /// Parses an STL file's bytes, binary or ASCII. Vertices are not merged.

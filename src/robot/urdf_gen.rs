@@ -57,7 +57,8 @@ pub fn write_hexapod_urdf(params: &HexapodParams, urdf_path: &Path) -> Result<()
         .write_stl(&mesh_path, &header)
         .map_err(|e| RobotError::io(&mesh_path, e))?;
     let text = hexapod_urdf_text(params, &stem, &mesh_rel);
-    std::fs::write(urdf_path, text).map_err(|e| RobotError::io(urdf_path, e))
+    crate::files::write_atomically(urdf_path, text.as_bytes())
+        .map_err(|e| RobotError::io(urdf_path, e))
 }
 
 /// The URDF document for `params`, naming the robot `name` and the leg mesh `mesh_file`

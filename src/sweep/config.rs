@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::SweepError;
+use super::{SweepError, SETTINGS_DIR};
 use crate::config_error::ConfigError;
 use crate::experiment::config::{check_output_name, start_override, start_positions_m, GaitWindow};
 use crate::scene::overrides::{deserialize_with_overrides, YamlProblem};
@@ -258,6 +258,32 @@ impl Sweep {
             .collect();
         self.settings.retain(|s| keep[s.study]);
         Ok(self)
+    }
+
+    /// `study/setting`: a setting's name in `--list`, `--run` and the progress lines.
+    pub fn label(&self, setting: &Setting) -> String {
+        format!(
+            "{}/{}",
+            self.config.studies[setting.study].name, setting.name
+        )
+    }
+
+    /// Every setting's [`Sweep::label`], in order.
+    pub fn labels(&self) -> Vec<String> {
+        self.settings.iter().map(|s| self.label(s)).collect()
+    }
+
+    /// Where setting `index` leaves its record under `out`: `settings/<study>/<n>.json`, `n`
+    /// its place in its study (from 0), the same whichever studies are run.
+    pub fn record_path(&self, out: &Path, index: usize) -> PathBuf {
+        let setting = &self.settings[index];
+        let place = self.settings[..index]
+            .iter()
+            .filter(|s| s.study == setting.study)
+            .count();
+        out.join(SETTINGS_DIR)
+            .join(&self.config.studies[setting.study].name)
+            .join(format!("{place:03}.json"))
     }
 
     /// The scene of `setting`.

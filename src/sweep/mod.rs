@@ -7,7 +7,9 @@
 //! error the quantity's relative error against the study's reference run or the published law.
 //! Results go to `results.csv` and `results.json` (after every run, so a crash keeps what was
 //! done) and a chart per study of error against cost with the Pareto front marked. A setting
-//! that fails (e.g. blows up) is recorded and the others go on.
+//! that fails (e.g. blows up) is recorded and the others go on. Every setting also leaves a
+//! record of its own in `settings/`, so the settings can be spread over a cluster's jobs and
+//! merged ([`crate::shard`], [`merge_sweep`]).
 
 pub mod chart;
 pub mod config;
@@ -28,6 +30,7 @@ use crate::experiment::config::GaitWindow;
 use crate::experiment::results::csv_table;
 use crate::progress::Progress;
 use crate::scene::{run_scene_observed, Observer, RunOptions, Simulation};
+use crate::shard::{local_time_now, MergeError, Selection, UnitRecord};
 
 /// Parent of the default output folders.
 pub const DEFAULT_OUT_PARENT: &str = "out/sweeps";
@@ -35,6 +38,8 @@ pub const DEFAULT_OUT_PARENT: &str = "out/sweeps";
 pub const RESULTS_CSV: &str = "results.csv";
 /// The results with the sweep's settings.
 pub const RESULTS_JSON: &str = "results.json";
+/// Each setting's record: `<out>/settings/<study>/<n>.json` ([`Sweep::record_path`]).
+pub const SETTINGS_DIR: &str = "settings";
 /// `status` of a setting that went through.
 pub const STATUS_OK: &str = "ok";
 /// Times within this much (s) of the window's start count as reaching it (frame times are
@@ -69,7 +74,14 @@ pub enum SweepError {
     Config(#[from] crate::config_error::ConfigError),
     #[error("drawing a chart: {0}")]
     Plot(#[from] PlotError),
+    #[error(transparent)]
+    Select(#[from] crate::shard::UnknownRun),
+    #[error(transparent)]
+    Records(#[from] MergeError),
 }
+
+/// What a setting leaves in `settings/` for a merge.
+pub type SettingRecord = UnitRecord<SweepConfig, SettingResult>;
 
 /// How to run a sweep.
 #[derive(Clone, Debug, Default)]
@@ -81,6 +93,9 @@ pub struct SweepOptions {
     /// Set (e.g. by a Ctrl-C handler) to stop the current run after its frame and skip the
     /// rest; everything so far is written.
     pub stop: Option<Arc<AtomicBool>>,
+    /// The settings to run: all (and the sweep's results written), or a shard or named
+    /// settings (only their records written, for [`merge_sweep`]).
+    pub select: Selection,
 }
 
 /// What one setting cost and measured: a row of `results.csv`.
@@ -259,64 +274,68 @@ fn standard_error(row: &SettingResult) -> Option<f64> {
     row.value_std.map(|s| s / (row.starts as f64).sqrt())
 }
 
-/// Runs every setting of `sweep`, writing `results.csv`, `results.json` (after every run) and
-/// a chart per study into the output folder.
+/// Runs the selected settings of `sweep` ([`SweepOptions::select`]), each leaving its record
+/// (`settings/<study>/<n>.json`) in the output folder. With every setting selected it also
+/// writes `results.csv`, `results.json` (after every run) and a chart per study; a shard
+/// leaves those to [`merge_sweep`].
 pub fn run_sweep(sweep: &Sweep, opts: &SweepOptions) -> Result<SweepReport, SweepError> {
     let cfg = &sweep.config;
     let out = opts
         .out_dir
         .clone()
         .unwrap_or_else(|| default_out_dir(&cfg.name));
-    let write_error = |path: &Path| {
-        let path = path.to_path_buf();
-        move |source| SweepError::from(crate::config_error::ConfigError::write(&path, source))
-    };
     std::fs::create_dir_all(&out).map_err(write_error(&out))?;
-    let csv_path = out.join(RESULTS_CSV);
-    let json_path = out.join(RESULTS_JSON);
-    let mut report = SweepReport {
-        sweep: cfg.name.clone(),
-        file: sweep.file.display().to_string(),
-        config: cfg.clone(),
-        out_dir: out.display().to_string(),
-        started: chrono::Local::now().format("%Y-%m-%d %H:%M:%S").to_string(),
-        threads: rayon::current_num_threads(),
-        results: Vec::with_capacity(sweep.settings.len()),
-        failed: 0,
-        wall_time_s: 0.0,
-        files: Vec::new(),
-    };
-    let write_results = |report: &SweepReport| -> Result<(), SweepError> {
-        std::fs::write(&csv_path, results_csv(&report.results)).map_err(write_error(&csv_path))?;
-        let json = serde_json::to_string_pretty(report).expect("plain data");
-        std::fs::write(&json_path, json + "\n").map_err(write_error(&json_path))
-    };
+    let labels = sweep.labels();
+    let names: Vec<&str> = labels.iter().map(String::as_str).collect();
+    let picked = opts.select.pick(&names)?;
+    let threads = rayon::current_num_threads();
+    let mut report = blank_report(sweep, &out, local_time_now(), threads);
 
-    let durations_s: Vec<f64> = sweep
-        .settings
+    let selected: Vec<usize> = (0..sweep.settings.len()).filter(|&i| picked[i]).collect();
+    let durations_s: Vec<f64> = selected
         .iter()
-        .map(|s| s.duration_s * s.runs() as f64)
+        .map(|&i| sweep.settings[i].duration_s * sweep.settings[i].runs() as f64)
         .collect();
     let progress = &opts.progress;
     progress.plan(&durations_s);
     let wall = Instant::now();
-    for (index, setting) in sweep.settings.iter().enumerate() {
-        let study = &cfg.studies[setting.study];
-        let label = format!("{}/{}", study.name, setting.name);
+    for index in selected {
+        let setting = &sweep.settings[index];
+        let label = &labels[index];
         let stopped = opts
             .stop
             .as_ref()
             .is_some_and(|s| s.load(Ordering::Relaxed));
+        let started = local_time_now();
         let result = if stopped {
             SettingResult {
                 status: "not run: the sweep was stopped".into(),
                 ..blank_result(sweep, setting)
             }
         } else {
-            progress.start_run(&label, Some(setting.duration_s * setting.runs() as f64));
+            progress.start_run(label, Some(setting.duration_s * setting.runs() as f64));
             let ply_dir = out.join("ply").join(format!("{index:03}"));
             run_setting(sweep, setting, ply_dir, opts)
         };
+        let stopped_by_now = opts
+            .stop
+            .as_ref()
+            .is_some_and(|s| s.load(Ordering::Relaxed));
+        if result.is_ok() || !stopped_by_now {
+            // A setting stopped (or never started) by a signal leaves no record: a merge names
+            // it as missing.
+            let record_file = sweep.record_path(&out, index);
+            let record = SettingRecord {
+                config: cfg.clone(),
+                started,
+                threads,
+                result: result.clone(),
+            };
+            crate::shard::write_record(&record_file, &record).map_err(write_error(&record_file))?;
+            if !opts.select.is_all() {
+                report.files.push(record_file.display().to_string());
+            }
+        }
         report.failed += usize::from(!result.is_ok());
         report.results.push(result);
         score(&mut report.results);
@@ -324,16 +343,79 @@ pub fn run_sweep(sweep: &Sweep, opts: &SweepOptions) -> Result<SweepReport, Swee
             let scored = report.results.last().expect("just pushed");
             progress.finish_run(
                 setting.duration_s * setting.runs() as f64,
-                &finish_line(&label, scored),
+                &finish_line(label, scored),
             );
         }
         report.wall_time_s = wall.elapsed().as_secs_f64();
-        write_results(&report)?;
+        if opts.select.is_all() {
+            write_tables(&report, &out)?;
+        }
     }
     progress.done();
+    if opts.select.is_all() {
+        write_final(&mut report, &out)?;
+    }
+    Ok(report)
+}
 
-    let mut files = vec![csv_path.clone(), json_path.clone()];
-    for study in &cfg.studies {
+/// Merges the records that the shards of `sweep` left in `out` (`settings/`) into the sweep's
+/// results, as [`run_sweep`] writes them for all its settings in one process; an error names
+/// the settings without a record. The report's wall time is the sum of the settings'.
+pub fn merge_sweep(sweep: &Sweep, out: &Path) -> Result<SweepReport, SweepError> {
+    let units: Vec<(String, PathBuf)> = sweep
+        .labels()
+        .into_iter()
+        .enumerate()
+        .map(|(index, label)| (label, sweep.record_path(out, index)))
+        .collect();
+    let records: Vec<SettingRecord> =
+        crate::shard::read_all_records(out, "settings", &units, &sweep.config)?;
+    let started = crate::shard::earliest_start(&records);
+    let threads = crate::shard::most_threads(&records);
+    let mut report = blank_report(sweep, out, started, threads);
+    report.results = records.into_iter().map(|r| r.result).collect();
+    score(&mut report.results);
+    report.failed = report.results.iter().filter(|r| !r.is_ok()).count();
+    report.wall_time_s = report.results.iter().filter_map(|r| r.wall_time_s).sum();
+    write_final(&mut report, out)?;
+    Ok(report)
+}
+
+/// An error writing `path`.
+fn write_error(path: &Path) -> impl FnOnce(std::io::Error) -> SweepError {
+    let path = path.to_path_buf();
+    move |source| SweepError::from(crate::config_error::ConfigError::write(&path, source))
+}
+
+/// The report of `sweep` in `out` before any setting.
+fn blank_report(sweep: &Sweep, out: &Path, started: String, threads: usize) -> SweepReport {
+    SweepReport {
+        sweep: sweep.config.name.clone(),
+        file: sweep.file.display().to_string(),
+        config: sweep.config.clone(),
+        out_dir: out.display().to_string(),
+        started,
+        threads,
+        results: Vec::with_capacity(sweep.settings.len()),
+        failed: 0,
+        wall_time_s: 0.0,
+        files: Vec::new(),
+    }
+}
+
+/// Writes `results.csv` and `results.json`.
+fn write_tables(report: &SweepReport, out: &Path) -> Result<(), SweepError> {
+    let csv_path = out.join(RESULTS_CSV);
+    std::fs::write(&csv_path, results_csv(&report.results)).map_err(write_error(&csv_path))?;
+    let json_path = out.join(RESULTS_JSON);
+    let json = serde_json::to_string_pretty(report).expect("plain data");
+    std::fs::write(&json_path, json + "\n").map_err(write_error(&json_path))
+}
+
+/// Draws each study's charts, lists the files and writes the tables a last time.
+fn write_final(report: &mut SweepReport, out: &Path) -> Result<(), SweepError> {
+    let mut files = vec![out.join(RESULTS_CSV), out.join(RESULTS_JSON)];
+    for study in &report.config.studies {
         if !report.results.iter().any(|r| r.study == study.name) {
             continue;
         }
@@ -350,21 +432,19 @@ pub fn run_sweep(sweep: &Sweep, opts: &SweepOptions) -> Result<SweepReport, Swee
             &study.name,
             study.quantity.error_label(),
             &note,
-            &out,
+            out,
         )?);
         if study.quantity == Quantity::CollapseRunout {
             files.extend(chart::write_law_chart(
                 &report.results,
                 &study.name,
                 &format!("{} threads", report.threads),
-                &out,
+                out,
             )?);
         }
     }
     report.files = files.iter().map(|p| p.display().to_string()).collect();
-    report.wall_time_s = wall.elapsed().as_secs_f64();
-    write_results(&report)?;
-    Ok(report)
+    write_tables(report, out)
 }
 
 /// A row for `setting` with nothing measured yet.
