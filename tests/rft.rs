@@ -175,3 +175,108 @@ fn auto_step_walks_as_far_as_quarter_millisecond_steps() {
         assert!(error < 0.06, "auto step off by {:.1} %", error * 100.0);
     }
 }
+
+/// RFT's stress maps measured on the default sand at the robot's grid (`calibrate-rft
+/// --maps`, the shipped settings: a leg-sized plate, 42 fitted points and 3 checks, about
+/// two minutes): the physics Li et al. found in theirs, the mirror symmetry RFT assumes, and
+/// the fit at angles it was not fitted on.
+#[test]
+fn stress_maps_of_the_mpm_sand_have_rft_s_shape_and_the_fit_holds_off_its_points() {
+    let maps = scene(&[])
+        .rft_stress_maps(&sandstep::progress::Progress::none())
+        .unwrap();
+    let fit = &maps.fit;
+    println!(
+        "zeta (fit) {:.4e} N/m^3, rms residual {:?}, generic {:?}",
+        fit.zeta_n_m3, fit.rms_residual_n_m3, fit.generic_rms_residual_n_m3
+    );
+    let at = |beta: f64, gamma: f64| {
+        let p = fit
+            .points
+            .iter()
+            .find(|p| (p.beta_deg - beta).abs() < 1e-9 && (p.gamma_deg - gamma).abs() < 1e-9)
+            .unwrap_or_else(|| panic!("no point at beta {beta}, gamma {gamma}"));
+        (p.alpha_x_n_m3, p.alpha_z_n_m3)
+    };
+    let (_, press) = at(0.0, 90.0);
+    // Pressing a horizontal plate straight down meets the most lift of any motion.
+    for p in &fit.points {
+        assert!(
+            p.alpha_z_n_m3 <= press,
+            "{p:?} lifts more than pressing down ({press})"
+        );
+    }
+    // Pulling it straight up, the sand holds it down.
+    assert!(at(0.0, -90.0).1 < -0.05 * press, "{:?}", at(0.0, -90.0));
+    // A vertical plate dragged sideways is held back far more than a flat one sliding.
+    let (vertical_drag, _) = at(90.0, 0.0);
+    let (flat_drag, _) = at(0.0, 0.0);
+    assert!(
+        vertical_drag > 0.2 * press,
+        "{vertical_drag} vs pressing {press}"
+    );
+    assert!(
+        vertical_drag > 5.0 * flat_drag.abs(),
+        "{vertical_drag} vs {flat_drag}"
+    );
+    // Mirror symmetry of vertical motion (x -> -x): alpha_z even and alpha_x odd in beta.
+    for beta in [30.0, 60.0] {
+        for gamma in [-90.0, 90.0] {
+            let ((x, z), (x_mirror, z_mirror)) = (at(beta, gamma), at(-beta, gamma));
+            assert!(
+                (z - z_mirror).abs() < 0.02 * press,
+                "beta {beta}, gamma {gamma}"
+            );
+            assert!(
+                (x + x_mirror).abs() < 0.02 * press,
+                "beta {beta}, gamma {gamma}"
+            );
+        }
+    }
+    // The fit off its points: within a fifth of zeta at every check (measured on the shipped
+    // settings: at most 0.16 zeta).
+    assert_eq!(fit.checks.len(), 3);
+    for check in &fit.checks {
+        let m = &check.measured;
+        let [x, z] = check.fitted_n_m3;
+        for (fitted, measured) in [(x, m.alpha_x_n_m3), (z, m.alpha_z_n_m3)] {
+            assert!(
+                (fitted - measured).abs() < 0.2 * fit.zeta_n_m3,
+                "{m:?}: fitted {fitted}, zeta {}",
+                fit.zeta_n_m3
+            );
+        }
+    }
+}
+
+#[test]
+fn stress_maps_refuse_angles_and_plates_they_cannot_use_by_name() {
+    // Angles out of range stop the scene's load, naming the field.
+    let error = Scene::load(
+        Path::new(SCENE),
+        &["terrain.rft.calibration.maps.gammas_deg=[0, 120]".to_string()],
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        error.contains("terrain.rft.calibration.maps.gammas_deg.1")
+            && error.contains("within +-90"),
+        "{error}"
+    );
+    // One intrusion angle cannot fix the fit, and a plate as thick as a cell is not a CPIC
+    // sheet: refused before any sand is simulated.
+    let refused = |overrides: &[&str]| {
+        let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
+        scene(&overrides)
+            .rft_stress_maps(&sandstep::progress::Progress::none())
+            .unwrap_err()
+            .to_string()
+    };
+    let error = refused(&["terrain.rft.calibration.maps.gammas_deg=[30]"]);
+    assert!(error.contains("do not fix the nine coefficients"), "{error}");
+    let error = refused(&["terrain.rft.calibration.maps.probe.thickness_m=0.01"]);
+    assert!(
+        error.contains("terrain.rft.calibration.maps") && error.contains("CPIC sheet"),
+        "{error}"
+    );
+}

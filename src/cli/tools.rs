@@ -73,6 +73,11 @@ pub struct CalibrateRftArgs {
     /// Scene file (YAML) with the sand, e.g. config/robot_on_sand.yaml; the test's settings
     /// are its terrain.rft.calibration.
     scene: PathBuf,
+    /// Measure RFT's stress maps instead: a leg-sized plate moved through the sand at each
+    /// attack and intrusion angle of terrain.rft.calibration.maps, and the generic form
+    /// fitted to them (minutes).
+    #[arg(long)]
+    maps: bool,
     #[command(flatten)]
     threads: Threads,
     #[command(flatten)]
@@ -221,6 +226,16 @@ pub fn analyze(args: AnalyzeArgs) -> anyhow::Result<()> {
 pub fn calibrate_rft(args: CalibrateRftArgs) -> anyhow::Result<()> {
     args.threads.apply()?;
     let scene = Scene::load(&args.scene, &args.overrides.overrides)?;
+    if args.maps {
+        let progress = super::progress::Bars::progress(args.json.show_progress());
+        let maps = scene.rft_stress_maps(&progress)?;
+        if args.json.json {
+            println!("{}", serde_json::to_string(&maps)?);
+        } else {
+            print!("{}", stress_maps_table(&maps));
+        }
+        return Ok(());
+    }
     let c = scene.calibrate_rft()?;
     if args.json.json {
         println!("{}", serde_json::to_string(&c)?);
@@ -251,6 +266,66 @@ pub fn calibrate_rft(args: CalibrateRftArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// The human summary of `calibrate-rft --maps`.
+fn stress_maps_table(maps: &crate::terrain::stress_map::StressMaps) -> String {
+    let fit = &maps.fit;
+    let c = &fit.coefficients;
+    let mut text = format!(
+        "{}: RFT stress maps of material {}, dx {:.1} mm, {} particles a bed, {:.0} s wall\n\
+         zeta (fit) = {:.4e} N/m^3; rms residual: fit {:.3e} / {:.3e}, generic shape \
+         {:.3e} / {:.3e} N/m^3 (alpha_x / alpha_z)\n\
+         coefficients (N/m^3): A00 {:.4e} A10 {:.4e} B11 {:.4e} B01 {:.4e} Bm11 {:.4e}\n\
+         \x20                    C11 {:.4e} C01 {:.4e} Cm11 {:.4e} D10 {:.4e}\n\
+         {:>8} {:>8} {:>12} {:>12} {:>12} {:>12}\n",
+        maps.scene,
+        maps.material,
+        maps.dx_m * 1e3,
+        maps.particles,
+        maps.wall_time_s,
+        fit.zeta_n_m3,
+        fit.rms_residual_n_m3[0],
+        fit.rms_residual_n_m3[1],
+        fit.generic_rms_residual_n_m3[0],
+        fit.generic_rms_residual_n_m3[1],
+        c.a00,
+        c.a10,
+        c.b11,
+        c.b01,
+        c.bm11,
+        c.c11,
+        c.c01,
+        c.cm11,
+        c.d10,
+        "beta",
+        "gamma",
+        "alpha_x",
+        "fit",
+        "alpha_z",
+        "fit"
+    );
+    let rows = fit
+        .points
+        .iter()
+        .map(|p| {
+            (
+                p,
+                c.alpha(p.beta_deg.to_radians(), p.gamma_deg.to_radians()),
+                "",
+            )
+        })
+        .chain(fit.checks.iter().map(|k| {
+            let [x, z] = k.fitted_n_m3;
+            (&k.measured, (x, z), "  (check, not fitted)")
+        }));
+    for (p, (x, z), note) in rows {
+        text.push_str(&format!(
+            "{:>8.1} {:>8.1} {:>12.4e} {:>12.4e} {:>12.4e} {:>12.4e}{note}\n",
+            p.beta_deg, p.gamma_deg, p.alpha_x_n_m3, x, p.alpha_z_n_m3, z
+        ));
+    }
+    text
 }
 
 /// Times the sand substep on a collapsing block and prints particle-steps per second, per

@@ -7,8 +7,10 @@ use super::config::{
 };
 use super::{Scene, SceneError};
 use crate::mpm::{SimError, Solver, Wall};
+use crate::progress::Progress;
 use crate::terrain::blade::{check, drag_blade, half_means, BladeDrag, BladeDragResult};
 use crate::terrain::calibration::{calibrate, RftCalibration};
+use crate::terrain::stress_map::{angles_fix_the_fit, measure_point, StressFit, StressMaps};
 use crate::terrain::TerrainConfig;
 
 /// Errors of a calibration.
@@ -27,6 +29,20 @@ impl Scene {
     /// The plate test's bed of `terrain.rft.calibration`, at rest and unsettled, and the name of
     /// its material: the calibration's `material`, else the first sand body's.
     pub fn rft_calibration_bed(&self) -> Result<(Solver, String), SceneError> {
+        let c = &self.config.terrain.rft.calibration;
+        let size_m = [c.bed_side_m, c.bed_side_m, c.bed_depth_m];
+        // Room for heaved sand: one plate side above the surface.
+        self.calibration_bed(size_m, c.plate_side_m, c.dx_m)
+    }
+
+    /// A bed of the calibration's material, `size_m` (x, y, depth, from the origin) on a grid
+    /// of `dx_m`, with `headroom_m` above its surface, at rest and unsettled.
+    fn calibration_bed(
+        &self,
+        size_m: [f32; 3],
+        headroom_m: f32,
+        dx_m: f32,
+    ) -> Result<(Solver, String), SceneError> {
         let c = &self.config.terrain.rft.calibration;
         let sand = self.sand().ok_or_else(|| {
             self.invalid(
@@ -64,11 +80,10 @@ impl Scene {
         config.sand = Some(SandConfig {
             domain: DomainConfig {
                 min_m: [0.0; 3],
-                // Room for heaved sand: one plate side above the surface.
-                max_m: [c.bed_side_m, c.bed_side_m, c.bed_depth_m + c.plate_side_m],
+                max_m: [size_m[0], size_m[1], size_m[2] + headroom_m],
                 walls: WallsConfig::all(slip),
             },
-            dx_m: c.dx_m,
+            dx_m,
             // All sand awake: a sleeping block is a rigid support, which would stiffen the
             // bed under the plate; the scene's other solver settings are kept.
             solver: SolverConfig {
@@ -82,7 +97,7 @@ impl Scene {
                 material: material.clone(),
                 box_shape: Some(BoxShape {
                     min_m: [0.0; 3],
-                    max_m: [c.bed_side_m, c.bed_side_m, c.bed_depth_m],
+                    max_m: size_m,
                 }),
                 cylinder: None,
                 particles_per_cell,
@@ -114,6 +129,89 @@ impl Scene {
             self.file.display().to_string(),
             material,
         )?)
+    }
+
+    /// `sandstep calibrate-rft --maps`: RFT's stress maps measured on this scene's sand
+    /// (`terrain.rft.calibration.maps`), each point on a fresh bed settled for the
+    /// calibration's `settle_s`, and fitted; `progress` hears of every point.
+    pub fn rft_stress_maps(&self, progress: &Progress) -> Result<StressMaps, CalibrationError> {
+        let c = &self.config.terrain.rft.calibration;
+        let maps = &c.maps;
+        let dx_m = match (maps.dx_m, self.sand()) {
+            (Some(dx), _) => dx,
+            (None, Some(sand)) => sand.dx_m,
+            (None, None) => c.dx_m,
+        };
+        let invalid = |message: String| {
+            CalibrationError::Scene(self.invalid("terrain.rft.calibration.maps", message))
+        };
+        if maps.probe.thickness_m >= dx_m {
+            return Err(invalid(format!(
+                "probe.thickness_m = {} must be below the grid spacing {dx_m} m (a CPIC sheet)",
+                maps.probe.thickness_m
+            )));
+        }
+        let fitted_angles: Vec<(f64, f64)> = maps
+            .betas_deg
+            .iter()
+            .flat_map(|&b| maps.gammas_deg.iter().map(move |&g| (b, g)))
+            .collect();
+        if !angles_fix_the_fit(&fitted_angles) {
+            return Err(invalid(
+                "betas_deg and gammas_deg do not fix the nine coefficients of the fit (take at \
+                 least three of each, not all one value)"
+                    .into(),
+            ));
+        }
+        let wall = std::time::Instant::now();
+        let angles: Vec<(f64, f64, bool)> = maps
+            .betas_deg
+            .iter()
+            .flat_map(|&b| maps.gammas_deg.iter().map(move |&g| (b, g, true)))
+            .chain(maps.check_deg.iter().map(|&[b, g]| (b, g, false)))
+            .collect();
+        let duration_s = c.settle_s + (maps.probe.travel_m / maps.probe.speed_m_s) as f64;
+        progress.plan(&vec![duration_s; angles.len()]);
+        let [length, width, depth] = maps.bed_m;
+        let surface_m = [0.5 * length, 0.5 * width, depth];
+        let (mut fitted, mut checked) = (Vec::new(), Vec::new());
+        let mut material = String::new();
+        let mut particles = 0;
+        for (beta_deg, gamma_deg, is_fitted) in angles {
+            let name = format!("beta {beta_deg} deg, gamma {gamma_deg} deg");
+            progress.start_run(&name, Some(duration_s));
+            let (mut bed, bed_material) =
+                self.calibration_bed(maps.bed_m, 0.5 * maps.probe.chord_m, dx_m)?;
+            (material, particles) = (bed_material, bed.particles.len());
+            bed.advance_to(c.settle_s)?;
+            let point = measure_point(
+                &mut bed,
+                surface_m,
+                &maps.probe,
+                [beta_deg, gamma_deg],
+                self.config.coupling.friction,
+            )?;
+            progress.finish_run(
+                duration_s,
+                &format!(
+                    "{name}: alpha_x {:.3e}, alpha_z {:.3e} N/m^3",
+                    point.alpha_x_n_m3, point.alpha_z_n_m3
+                ),
+            );
+            if is_fitted { &mut fitted } else { &mut checked }.push(point);
+        }
+        progress.done();
+        let fit = StressFit::of(fitted, &checked)
+            .ok_or_else(|| invalid("the measured points do not fix the fit".into()))?;
+        Ok(StressMaps {
+            scene: self.file.display().to_string(),
+            material,
+            dx_m: dx_m as f64,
+            particles,
+            probe: maps.probe.clone(),
+            fit,
+            wall_time_s: wall.elapsed().as_secs_f64(),
+        })
     }
 
     /// `sandstep drag-blade`: `blade` dragged through the plate test's bed of

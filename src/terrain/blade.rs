@@ -170,6 +170,7 @@ pub fn drag_blade(
         duration_s: (blade.travel_m / blade.speed_m_s) as f64,
         window_s: blade.window_s,
         friction,
+        pitch_rad: 0.0,
     };
     let substeps_before = solver.steps;
     let samples = move_plate(solver, &motion)?;

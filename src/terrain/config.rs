@@ -8,6 +8,7 @@
 
 use serde::Deserialize;
 
+use super::stress_map::StressProbe;
 use crate::config_error::FieldError;
 
 /// Default medium scale zeta (N/m^3): `sandstep calibrate-rft config/robot_on_sand.yaml`,
@@ -164,6 +165,46 @@ pub struct RftCalibrationConfig {
     pub settle_s: f64,
     /// The force is averaged over windows of this length (s), > 0. Default 0.001.
     pub window_s: f64,
+    /// The stress maps of `sandstep calibrate-rft --maps`.
+    pub maps: StressMapConfig,
+}
+
+/// `terrain.rft.calibration.maps`: a leg-sized plate moved through a settled bed of the
+/// scene's sand at each attack angle beta and intrusion angle gamma
+/// ([`super::stress_map`]), the stress per unit depth measured and fitted with RFT's generic
+/// form. Each point is a fresh bed, settled for `settle_s` of the calibration.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct StressMapConfig {
+    /// Grid spacing (m), > 0. Default: the scene's `sand.dx_m` (the grid the robot walks on).
+    pub dx_m: Option<f32>,
+    /// The bed: length along the motion (x), width (y) and depth (m). Default 0.16, 0.06,
+    /// 0.09.
+    pub bed_m: [f32; 3],
+    /// Attack angles beta of the fitted points (deg). Default -60 to 90 by 30.
+    pub betas_deg: Vec<f64>,
+    /// Intrusion angles gamma of the fitted points (deg), in [-90, 90]. Default -90 to 90
+    /// by 30.
+    pub gammas_deg: Vec<f64>,
+    /// Points not fitted, on which the fit is checked: `[beta, gamma]` (deg). Default
+    /// `[45, 15]`, `[-15, 45]`, `[75, -45]`.
+    pub check_deg: Vec<[f64; 2]>,
+    /// The plate and its motion ([`StressProbe`]: a 4.1 x 1 cm leg, 3 mm thick, at 0.1 m/s,
+    /// moved 3 cm and fitted over the last 2, its top at least 5 mm deep).
+    pub probe: StressProbe,
+}
+
+impl Default for StressMapConfig {
+    fn default() -> Self {
+        StressMapConfig {
+            dx_m: None,
+            bed_m: [0.16, 0.06, 0.09],
+            betas_deg: vec![-60.0, -30.0, 0.0, 30.0, 60.0, 90.0],
+            gammas_deg: vec![-90.0, -60.0, -30.0, 0.0, 30.0, 60.0, 90.0],
+            check_deg: vec![[45.0, 15.0], [-15.0, 45.0], [75.0, -45.0]],
+            probe: StressProbe::default(),
+        }
+    }
 }
 
 impl Default for RftCalibrationConfig {
@@ -179,6 +220,7 @@ impl Default for RftCalibrationConfig {
             final_depth_m: 0.02,
             settle_s: 0.05,
             window_s: 0.001,
+            maps: StressMapConfig::default(),
         }
     }
 }
@@ -197,21 +239,24 @@ impl TerrainConfig {
     }
 }
 
+/// `v` as the value of `field`: an error unless it is a finite number > 0.
+fn positive_field(field: String, v: f64) -> Result<(), FieldError> {
+    if v > 0.0 && v.is_finite() {
+        Ok(())
+    } else {
+        Err(FieldError::new(
+            field,
+            format!("{v} must be a finite number > 0"),
+        ))
+    }
+}
+
 // Negated comparisons (`!(a > b)`) on purpose: they reject NaN too.
 #[allow(clippy::neg_cmp_op_on_partial_ord)]
 fn validate(t: &TerrainConfig, robot_floor_m: Option<f64>) -> Result<(), FieldError> {
     let rft = &t.rft;
     let field = |f: &str| format!("terrain.rft.{f}");
-    let positive = |f: &str, v: f64| {
-        if v > 0.0 && v.is_finite() {
-            Ok(())
-        } else {
-            Err(FieldError::new(
-                field(f),
-                format!("{v} must be a finite number > 0"),
-            ))
-        }
-    };
+    let positive = |f: &str, v: f64| positive_field(field(f), v);
     positive("zeta_n_m3", rft.zeta_n_m3)?;
     positive("element_size_m", rft.element_size_m)?;
     positive("reference_speed_m_s", rft.reference_speed_m_s)?;
@@ -311,6 +356,7 @@ fn validate_calibration(
         c.bed_depth_m as f64,
         &format!("deeper than final_depth_m = {}", c.final_depth_m),
     )?;
+    validate_maps(&c.maps)?;
     if let (Some(name), Some(known)) = (&c.material, materials) {
         if !known.contains(&name.as_str()) {
             return Err(FieldError::new(
@@ -318,6 +364,66 @@ fn validate_calibration(
                 format!("unknown material `{name}` (materials: {known:?})"),
             ));
         }
+    }
+    Ok(())
+}
+
+/// Checks `terrain.rft.calibration.maps`; errors name the field.
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
+fn validate_maps(m: &StressMapConfig) -> Result<(), FieldError> {
+    let field = |f: &str| format!("terrain.rft.calibration.maps.{f}");
+    let positive = |f: &str, v: f64| positive_field(field(f), v);
+    if let Some(dx) = m.dx_m {
+        positive("dx_m", dx as f64)?;
+    }
+    for (i, side) in m.bed_m.iter().enumerate() {
+        positive(&format!("bed_m.{i}"), *side as f64)?;
+    }
+    let p = &m.probe;
+    for (f, v) in [
+        ("probe.chord_m", p.chord_m as f64),
+        ("probe.width_m", p.width_m as f64),
+        ("probe.thickness_m", p.thickness_m as f64),
+        ("probe.speed_m_s", p.speed_m_s as f64),
+        ("probe.travel_m", p.travel_m as f64),
+        ("probe.window_s", p.window_s),
+    ] {
+        positive(f, v)?;
+    }
+    if !(p.build_up_m >= 0.0 && p.build_up_m < p.travel_m) {
+        return Err(FieldError::new(
+            field("probe.build_up_m"),
+            format!(
+                "{} must be >= 0 and below travel_m = {}",
+                p.build_up_m, p.travel_m
+            ),
+        ));
+    }
+    if !(p.min_depth_m >= 0.0 && p.min_depth_m.is_finite()) {
+        return Err(FieldError::new(
+            field("probe.min_depth_m"),
+            format!("{} must be a finite number >= 0", p.min_depth_m),
+        ));
+    }
+    let angle = |f: String, v: f64, limit: f64| {
+        if v.abs() <= limit {
+            Ok(())
+        } else {
+            Err(FieldError::new(
+                f,
+                format!("{v} deg must be within +-{limit} deg"),
+            ))
+        }
+    };
+    for (i, &b) in m.betas_deg.iter().enumerate() {
+        angle(field(&format!("betas_deg.{i}")), b, 90.0)?;
+    }
+    for (i, &g) in m.gammas_deg.iter().enumerate() {
+        angle(field(&format!("gammas_deg.{i}")), g, 90.0)?;
+    }
+    for (i, [b, g]) in m.check_deg.iter().enumerate() {
+        angle(field(&format!("check_deg.{i}.0")), *b, 90.0)?;
+        angle(field(&format!("check_deg.{i}.1")), *g, 90.0)?;
     }
     Ok(())
 }

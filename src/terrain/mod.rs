@@ -6,6 +6,8 @@
 //!   resistance is local and rate independent, hundreds of times cheaper than MPM.
 //! - [`plate`] and [`calibration`]: a plate pressed into MPM sand, and the fit of RFT's scale
 //!   zeta to it (`sandstep calibrate-rft`).
+//! - [`stress_map`]: RFT's stress per unit depth over attack and intrusion angle, measured on
+//!   MPM sand with a leg-sized plate and fitted (`sandstep calibrate-rft --maps`).
 //!
 //! Rigid ground, the third model, is rapier's ground plane under the robot (`crate::robot`).
 
@@ -14,6 +16,7 @@ pub mod calibration;
 pub mod config;
 pub mod plate;
 pub mod rft;
+pub mod stress_map;
 
 pub use config::{
     RftCalibrationConfig, RftConfig, RftParams, RftStep, TerrainConfig, TerrainModel,

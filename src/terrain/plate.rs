@@ -49,6 +49,7 @@ pub fn press_plate(sand: &mut Solver, press: &PlatePress) -> Result<Vec<PlateSam
         duration_s: (press.final_depth_m / press.speed_m_s) as f64,
         window_s: press.window_s,
         friction: press.friction,
+        pitch_rad: 0.0,
     };
     move_plate(sand, &motion)
 }
@@ -69,6 +70,22 @@ pub struct PlateMotion {
     pub window_s: f64,
     /// Coulomb friction coefficient sand-plate (-).
     pub friction: f32,
+    /// The plate turned about +y by this angle (rad, right-handed: its local +x goes to
+    /// `(cos, 0, -sin)`); 0 for a plate along the axes.
+    pub pitch_rad: f32,
+}
+
+/// The sand's mean force on a moving plate over one window, as a vector.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct PlateForceSample {
+    /// Position of the plate's centre at the end of the window (m).
+    pub centre_m: [f64; 3],
+    /// How far the plate has moved along its velocity at the end of the window (m).
+    pub travelled_m: f64,
+    /// Mean force of the sand on the plate over the window (N): impulse over its length.
+    pub force_n: [f64; 3],
+    /// Its component against the motion (N), summed substep by substep.
+    pub force_against_motion_n: f64,
 }
 
 /// Moves the plate of `motion`, stepping `sand` with the CPIC coupling (one-way: the sand
@@ -76,6 +93,21 @@ pub struct PlateMotion {
 /// [`Coupling::max_dt_s`]), and returns one sample per window: the distance travelled
 /// (`depth_m`) and the sand's mean force against the motion (`force_n`, along `-velocity`).
 pub fn move_plate(sand: &mut Solver, motion: &PlateMotion) -> Result<Vec<PlateSample>, SimError> {
+    let samples = move_plate_forces(sand, motion)?;
+    Ok(samples
+        .iter()
+        .map(|s| PlateSample {
+            depth_m: s.travelled_m,
+            force_n: s.force_against_motion_n,
+        })
+        .collect())
+}
+
+/// [`move_plate`] with the whole force and the plate's position of every window.
+pub fn move_plate_forces(
+    sand: &mut Solver,
+    motion: &PlateMotion,
+) -> Result<Vec<PlateForceSample>, SimError> {
     let mut bodies = RigidBodySet::new();
     let [x, y, z] = motion.start_m;
     let [vx, vy, vz] = motion.velocity_m_s;
@@ -83,12 +115,15 @@ pub fn move_plate(sand: &mut Solver, motion: &PlateMotion) -> Result<Vec<PlateSa
     let velocity = Vec3::new(vx, vy, vz);
     // In f64, so that an axis-aligned motion gives an exact unit axis (the press's samples are
     // the bits they were).
-    let [ux, uy, uz] = [vx as f64, vy as f64, vz as f64];
+    let [ux, uy, uz] = motion.velocity_m_s.map(f64::from);
     let speed = (ux * ux + uy * uy + uz * uz).sqrt();
     let direction = [ux / speed, uy / speed, uz / speed];
     let plate = bodies.insert(
         RigidBodyBuilder::kinematic_velocity_based()
-            .translation(start)
+            .pose(Pose::from_parts(
+                start,
+                rapier3d::glamx::Quat::from_rotation_y(motion.pitch_rad),
+            ))
             .linvel(velocity),
     );
     let collider = SandCollider {
@@ -106,24 +141,30 @@ pub fn move_plate(sand: &mut Solver, motion: &PlateMotion) -> Result<Vec<PlateSa
     let mut window_end = sand.time_s;
     while window_end < end_s {
         window_end += motion.window_s;
-        let (mut impulse_n_s, mut elapsed_s) = (0.0f64, 0.0f64);
+        let (mut impulse_n_s, mut against_n_s, mut elapsed_s) = ([0.0f64; 3], 0.0f64, 0.0f64);
         while sand.time_s < window_end {
             let dt = sand.next_dt().min(coupling.max_dt_s(&bodies, dx));
             let impulses = coupling.substep(sand, &mut bodies, dt)?;
             let j = impulses[0].linear_n_s;
-            impulse_n_s -= j.x * direction[0] + j.y * direction[1] + j.z * direction[2];
+            against_n_s -= j.x * direction[0] + j.y * direction[1] + j.z * direction[2];
+            for (sum, part) in impulse_n_s.iter_mut().zip([j.x, j.y, j.z]) {
+                *sum += part;
+            }
             elapsed_s += dt as f64;
             let rb = &mut bodies[plate];
             let moved = rb.translation() + rb.linvel() * dt;
             rb.set_translation(moved, true);
         }
-        let moved = bodies[plate].translation() - start;
+        let centre = bodies[plate].translation();
+        let moved = centre - start;
         let travelled_m = moved.x as f64 * direction[0]
             + moved.y as f64 * direction[1]
             + moved.z as f64 * direction[2];
-        samples.push(PlateSample {
-            depth_m: travelled_m,
-            force_n: impulse_n_s / elapsed_s,
+        samples.push(PlateForceSample {
+            centre_m: [centre.x, centre.y, centre.z].map(f64::from),
+            travelled_m,
+            force_n: impulse_n_s.map(|j| j / elapsed_s),
+            force_against_motion_n: against_n_s / elapsed_s,
         });
     }
     Ok(samples)
