@@ -219,7 +219,19 @@ fn stress_maps_of_the_mpm_sand_have_rft_s_shape_and_the_fit_holds_off_its_points
         vertical_drag > 5.0 * flat_drag.abs(),
         "{vertical_drag} vs {flat_drag}"
     );
-    // Mirror symmetry of vertical motion (x -> -x): alpha_z even and alpha_x odd in beta.
+    // A plate rising towards the front (beta > 0) pushes sand down ahead of it: much lift and
+    // drag; falling towards the front, little (Li et al.'s maps, and the signs of rft.rs).
+    let (rising, falling) = (at(30.0, 0.0), at(-30.0, 0.0));
+    assert!(
+        rising.1 > falling.1 + 0.1 * press,
+        "{rising:?} vs {falling:?}"
+    );
+    assert!(
+        rising.0 > falling.0 + 0.1 * press,
+        "{rising:?} vs {falling:?}"
+    );
+    // Mirror symmetry of vertical motion (x -> -x): alpha_z even and alpha_x odd in beta
+    // (here it follows from the bed's own mirror symmetry about the plate's path).
     for beta in [30.0, 60.0] {
         for gamma in [-90.0, 90.0] {
             let ((x, z), (x_mirror, z_mirror)) = (at(beta, gamma), at(-beta, gamma));
@@ -273,10 +285,23 @@ fn stress_maps_refuse_angles_and_plates_they_cannot_use_by_name() {
             .to_string()
     };
     let error = refused(&["terrain.rft.calibration.maps.gammas_deg=[30]"]);
-    assert!(error.contains("do not fix the nine coefficients"), "{error}");
-    let error = refused(&["terrain.rft.calibration.maps.probe.thickness_m=0.01"]);
     assert!(
-        error.contains("terrain.rft.calibration.maps") && error.contains("CPIC sheet"),
+        error.contains("does not fix the nine coefficients"),
+        "{error}"
+    );
+    let error = refused(&[
+        "terrain.rft.calibration.maps.probe.thickness_m=0.01",
+        "terrain.rft.calibration.maps.probe.width_m=0.02",
+    ]);
+    assert!(
+        error.contains("terrain.rft.calibration.maps.probe.thickness_m")
+            && error.contains("CPIC sheet"),
+        "{error}"
+    );
+    // A bed too shallow for the plate's path.
+    let error = refused(&["terrain.rft.calibration.maps.bed_m=[0.16, 0.06, 0.05]"]);
+    assert!(
+        error.contains("terrain.rft.calibration.maps.bed_m.2") && error.contains("too small"),
         "{error}"
     );
 }

@@ -273,9 +273,10 @@ fn stress_maps_table(maps: &crate::terrain::stress_map::StressMaps) -> String {
     let fit = &maps.fit;
     let c = &fit.coefficients;
     let mut text = format!(
-        "{}: RFT stress maps of material {}, dx {:.1} mm, {} particles a bed, {:.0} s wall\n\
-         zeta (fit) = {:.4e} N/m^3; rms residual: fit {:.3e} / {:.3e}, generic shape \
-         {:.3e} / {:.3e} N/m^3 (alpha_x / alpha_z)\n\
+        "{}: RFT stress maps of material {}, dx {:.1} mm, {} particles a bed, settled surface \
+         {:.2} mm, {:.0} s wall\n\
+         zeta (fit) = {:.4e} N/m^3; rms residual: fit {:.3e} / {:.3e}, generic shape at its \
+         best zeta {:.4e}: {:.3e} / {:.3e} N/m^3 (alpha_x / alpha_z)\n\
          coefficients (N/m^3): A00 {:.4e} A10 {:.4e} B11 {:.4e} B01 {:.4e} Bm11 {:.4e}\n\
          \x20                    C11 {:.4e} C01 {:.4e} Cm11 {:.4e} D10 {:.4e}\n\
          {:>8} {:>8} {:>12} {:>12} {:>12} {:>12}\n",
@@ -283,10 +284,12 @@ fn stress_maps_table(maps: &crate::terrain::stress_map::StressMaps) -> String {
         maps.material,
         maps.dx_m * 1e3,
         maps.particles,
+        maps.settled_surface_m * 1e3,
         maps.wall_time_s,
         fit.zeta_n_m3,
         fit.rms_residual_n_m3[0],
         fit.rms_residual_n_m3[1],
+        fit.generic_zeta_n_m3,
         fit.generic_rms_residual_n_m3[0],
         fit.generic_rms_residual_n_m3[1],
         c.a00,

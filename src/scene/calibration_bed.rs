@@ -25,6 +25,23 @@ pub enum CalibrationError {
     Option(String),
 }
 
+/// Room above a stress-map bed for heaved sand, in plate chords.
+const STRESS_MAP_HEADROOM_CHORDS: f32 = 0.5;
+
+/// Mean height of the highest particles of a bed of `size_m` (length, width, depth from the
+/// origin), one layer's worth: its particles over its layers, the depth over the particles'
+/// spacing (m).
+fn top_layer_height_m(bed: &Solver, size_m: [f32; 3]) -> f32 {
+    let mut heights: Vec<f32> = bed.particles.position.iter().map(|p| p.z).collect();
+    let count = heights.len();
+    let [length, width, depth] = size_m;
+    let spacing = libm::cbrtf(length * width * depth / count as f32);
+    let layers = (depth / spacing).round().max(1.0) as usize;
+    let layer = (count / layers).max(1);
+    heights.select_nth_unstable_by(count - layer, f32::total_cmp);
+    heights[count - layer..].iter().sum::<f32>() / layer as f32
+}
+
 impl Scene {
     /// The plate test's bed of `terrain.rft.calibration`, at rest and unsettled, and the name of
     /// its material: the calibration's `material`, else the first sand body's.
@@ -142,14 +159,45 @@ impl Scene {
             (None, Some(sand)) => sand.dx_m,
             (None, None) => c.dx_m,
         };
-        let invalid = |message: String| {
-            CalibrationError::Scene(self.invalid("terrain.rft.calibration.maps", message))
+        let invalid = |field: &str, message: String| {
+            let field = format!("terrain.rft.calibration.maps.{field}");
+            CalibrationError::Scene(self.invalid(field, message))
         };
-        if maps.probe.thickness_m >= dx_m {
-            return Err(invalid(format!(
-                "probe.thickness_m = {} must be below the grid spacing {dx_m} m (a CPIC sheet)",
-                maps.probe.thickness_m
-            )));
+        let probe = &maps.probe;
+        if probe.thickness_m >= dx_m {
+            return Err(invalid(
+                "probe.thickness_m",
+                format!(
+                    "{} must be below the grid spacing {dx_m} m (a CPIC sheet)",
+                    probe.thickness_m
+                ),
+            ));
+        }
+        // The plate's path, whatever the angles, stays a cell from the bed's walls and floor.
+        let [length, width, depth] = maps.bed_m;
+        let reach = [
+            (
+                "bed_m.0",
+                probe.travel_m + probe.chord_m + 2.0 * dx_m,
+                length,
+            ),
+            ("bed_m.1", probe.width_m + 2.0 * dx_m, width),
+            (
+                "bed_m.2",
+                probe.min_depth_m + probe.chord_m + probe.travel_m + dx_m,
+                depth,
+            ),
+        ];
+        for (field, needed, side) in reach {
+            if side < needed {
+                return Err(invalid(
+                    field,
+                    format!(
+                        "{side} m is too small: the plate's path, a cell from every wall and \
+                         the floor, needs {needed} m"
+                    ),
+                ));
+            }
         }
         let fitted_angles: Vec<(f64, f64)> = maps
             .betas_deg
@@ -158,8 +206,9 @@ impl Scene {
             .collect();
         if !angles_fix_the_fit(&fitted_angles) {
             return Err(invalid(
-                "betas_deg and gammas_deg do not fix the nine coefficients of the fit (take at \
-                 least three of each, not all one value)"
+                "betas_deg",
+                "with gammas_deg, does not fix the nine coefficients of the fit (take at least \
+                 three different betas, -90 and 90 counting as one, and three gammas)"
                     .into(),
             ));
         }
@@ -172,21 +221,23 @@ impl Scene {
             .collect();
         let duration_s = c.settle_s + (maps.probe.travel_m / maps.probe.speed_m_s) as f64;
         progress.plan(&vec![duration_s; angles.len()]);
-        let [length, width, depth] = maps.bed_m;
-        let surface_m = [0.5 * length, 0.5 * width, depth];
         let (mut fitted, mut checked) = (Vec::new(), Vec::new());
         let mut material = String::new();
-        let mut particles = 0;
+        let (mut particles, mut surface_z_m) = (0, depth);
         for (beta_deg, gamma_deg, is_fitted) in angles {
             let name = format!("beta {beta_deg} deg, gamma {gamma_deg} deg");
             progress.start_run(&name, Some(duration_s));
-            let (mut bed, bed_material) =
-                self.calibration_bed(maps.bed_m, 0.5 * maps.probe.chord_m, dx_m)?;
+            let headroom_m = STRESS_MAP_HEADROOM_CHORDS * probe.chord_m;
+            let (mut bed, bed_material) = self.calibration_bed(maps.bed_m, headroom_m, dx_m)?;
             (material, particles) = (bed_material, bed.particles.len());
+            let top_before_m = top_layer_height_m(&bed, maps.bed_m);
             bed.advance_to(c.settle_s)?;
+            // Depth is measured from the settled surface: the filled top, less what the top
+            // layer of particles sank while settling.
+            surface_z_m = depth - (top_before_m - top_layer_height_m(&bed, maps.bed_m));
             let point = measure_point(
                 &mut bed,
-                surface_m,
+                [0.5 * length, 0.5 * width, surface_z_m],
                 &maps.probe,
                 [beta_deg, gamma_deg],
                 self.config.coupling.friction,
@@ -202,12 +253,13 @@ impl Scene {
         }
         progress.done();
         let fit = StressFit::of(fitted, &checked)
-            .ok_or_else(|| invalid("the measured points do not fix the fit".into()))?;
+            .ok_or_else(|| invalid("betas_deg", "the measured points do not fix the fit".into()))?;
         Ok(StressMaps {
             scene: self.file.display().to_string(),
             material,
             dx_m: dx_m as f64,
             particles,
+            settled_surface_m: surface_z_m as f64,
             probe: maps.probe.clone(),
             fit,
             wall_time_s: wall.elapsed().as_secs_f64(),

@@ -368,6 +368,10 @@ fn validate_calibration(
     Ok(())
 }
 
+/// Largest attack or intrusion angle of the stress maps (deg): Li et al.'s range, which RFT's
+/// symmetries extend to every angle.
+pub const MAX_MAP_ANGLE_DEG: f64 = 90.0;
+
 /// Checks `terrain.rft.calibration.maps`; errors name the field.
 #[allow(clippy::neg_cmp_op_on_partial_ord)]
 fn validate_maps(m: &StressMapConfig) -> Result<(), FieldError> {
@@ -399,31 +403,33 @@ fn validate_maps(m: &StressMapConfig) -> Result<(), FieldError> {
             ),
         ));
     }
-    if !(p.min_depth_m >= 0.0 && p.min_depth_m.is_finite()) {
+    positive("probe.min_depth_m", p.min_depth_m as f64)?;
+    if !(p.thickness_m < p.width_m.min(p.chord_m)) {
         return Err(FieldError::new(
-            field("probe.min_depth_m"),
-            format!("{} must be a finite number >= 0", p.min_depth_m),
+            field("probe.thickness_m"),
+            format!(
+                "{} must be below width_m and chord_m (the plate's thin side)",
+                p.thickness_m
+            ),
         ));
     }
-    let angle = |f: String, v: f64, limit: f64| {
-        if v.abs() <= limit {
+    let angle = |f: String, v: f64| {
+        if v.abs() <= MAX_MAP_ANGLE_DEG {
             Ok(())
         } else {
-            Err(FieldError::new(
-                f,
-                format!("{v} deg must be within +-{limit} deg"),
-            ))
+            let message = format!("{v} deg must be within +-{MAX_MAP_ANGLE_DEG} deg");
+            Err(FieldError::new(f, message))
         }
     };
     for (i, &b) in m.betas_deg.iter().enumerate() {
-        angle(field(&format!("betas_deg.{i}")), b, 90.0)?;
+        angle(field(&format!("betas_deg.{i}")), b)?;
     }
     for (i, &g) in m.gammas_deg.iter().enumerate() {
-        angle(field(&format!("gammas_deg.{i}")), g, 90.0)?;
+        angle(field(&format!("gammas_deg.{i}")), g)?;
     }
     for (i, [b, g]) in m.check_deg.iter().enumerate() {
-        angle(field(&format!("check_deg.{i}.0")), *b, 90.0)?;
-        angle(field(&format!("check_deg.{i}.1")), *g, 90.0)?;
+        angle(field(&format!("check_deg.{i}.0")), *b)?;
+        angle(field(&format!("check_deg.{i}.1")), *g)?;
     }
     Ok(())
 }

@@ -78,7 +78,8 @@ pub struct PlateMotion {
 /// The sand's mean force on a moving plate over one window, as a vector.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct PlateForceSample {
-    /// Position of the plate's centre at the end of the window (m).
+    /// Position of the plate's centre in the middle of the window (m): the mean of its
+    /// positions at the window's start and end.
     pub centre_m: [f64; 3],
     /// How far the plate has moved along its velocity at the end of the window (m).
     pub travelled_m: f64,
@@ -141,6 +142,7 @@ pub fn move_plate_forces(
     let mut window_end = sand.time_s;
     while window_end < end_s {
         window_end += motion.window_s;
+        let centre_at_start = bodies[plate].translation();
         let (mut impulse_n_s, mut against_n_s, mut elapsed_s) = ([0.0f64; 3], 0.0f64, 0.0f64);
         while sand.time_s < window_end {
             let dt = sand.next_dt().min(coupling.max_dt_s(&bodies, dx));
@@ -161,7 +163,11 @@ pub fn move_plate_forces(
             + moved.y as f64 * direction[1]
             + moved.z as f64 * direction[2];
         samples.push(PlateForceSample {
-            centre_m: [centre.x, centre.y, centre.z].map(f64::from),
+            centre_m: [
+                0.5 * (centre_at_start.x as f64 + centre.x as f64),
+                0.5 * (centre_at_start.y as f64 + centre.y as f64),
+                0.5 * (centre_at_start.z as f64 + centre.z as f64),
+            ],
             travelled_m,
             force_n: impulse_n_s.map(|j| j / elapsed_s),
             force_against_motion_n: against_n_s / elapsed_s,

@@ -31,7 +31,7 @@ pub struct StressProbe {
     pub travel_m: f32,
     /// The first part of the travel, while the force builds up, is not fitted (m).
     pub build_up_m: f32,
-    /// Depth of the plate's highest point below the surface at its shallowest (m).
+    /// Depth of the plate's highest point below the surface at its shallowest (m), > 0.
     pub min_depth_m: f32,
     /// The force is averaged over windows of this length (s).
     pub window_s: f64,
@@ -164,14 +164,23 @@ fn alpha_of(
 /// The nine coefficients of the generic form, in N/m^3 (module docs).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StressCoefficients {
+    /// `alpha_z`'s constant term.
     pub a00: f64,
+    /// `alpha_z`'s `cos 2b` term.
     pub a10: f64,
+    /// `alpha_z`'s `sin(2b + g)` term.
     pub b11: f64,
+    /// `alpha_z`'s `sin g` term.
     pub b01: f64,
+    /// `alpha_z`'s `sin(-2b + g)` term.
     pub bm11: f64,
+    /// `alpha_x`'s `cos(2b + g)` term.
     pub c11: f64,
+    /// `alpha_x`'s `cos g` term.
     pub c01: f64,
+    /// `alpha_x`'s `sin(-2b + g)` term.
     pub cm11: f64,
+    /// `alpha_x`'s `sin 2b` term.
     pub d10: f64,
 }
 
@@ -282,6 +291,9 @@ pub struct StressMaps {
     pub dx_m: f64,
     /// Particles in each bed.
     pub particles: usize,
+    /// Height of the settled surface, from which depths are measured (m): the filled bed's
+    /// top less what its top layer of particles sank while settling.
+    pub settled_surface_m: f64,
     /// The plate and its motion.
     pub probe: StressProbe,
     /// The points, the fit and its check.
@@ -302,8 +314,11 @@ pub struct StressFit {
     pub zeta_n_m3: f64,
     /// Root-mean-square residual of the fit over the points, `[alpha_x, alpha_z]` (N/m^3).
     pub rms_residual_n_m3: [f64; 2],
-    /// The same for Li et al.'s generic shape at the fitted zeta: how far the sand's maps are
-    /// from the shape RFT assumed before (N/m^3).
+    /// The scale that fits Li et al.'s generic shape best to the points, alone (least
+    /// squares over both alphas; N/m^3).
+    pub generic_zeta_n_m3: f64,
+    /// Root-mean-square residual of that generic shape: how far the sand's maps are from the
+    /// shape RFT assumed before (N/m^3).
     pub generic_rms_residual_n_m3: [f64; 2],
     /// Points not fitted, each with the fit's alpha there.
     pub checks: Vec<StressCheck>,
@@ -312,6 +327,7 @@ pub struct StressFit {
 /// A point not fitted, and what the fit gives there.
 #[derive(Clone, Copy, Debug, Serialize)]
 pub struct StressCheck {
+    /// The point as measured.
     pub measured: StressPoint,
     /// The fit's `alpha_x`, `alpha_z` at the point (N/m^3).
     pub fitted_n_m3: [f64; 2],
@@ -322,7 +338,16 @@ impl StressFit {
     pub fn of(points: Vec<StressPoint>, checks: &[StressPoint]) -> Option<StressFit> {
         let (coefficients, rms_residual_n_m3) = fit(&points)?;
         let zeta_n_m3 = coefficients.zeta_n_m3();
-        let generic = StressCoefficients::generic(zeta_n_m3);
+        // The generic shape's best scale: sum(shape x measured) / sum(shape^2).
+        let unit = StressCoefficients::generic(1.0);
+        let (mut shape_measured, mut shape_sq) = (0.0, 0.0);
+        for p in &points {
+            let (x, z) = unit.alpha(p.beta_deg.to_radians(), p.gamma_deg.to_radians());
+            shape_measured += x * p.alpha_x_n_m3 + z * p.alpha_z_n_m3;
+            shape_sq += x * x + z * z;
+        }
+        let generic_zeta_n_m3 = shape_measured / shape_sq;
+        let generic = StressCoefficients::generic(generic_zeta_n_m3);
         let rms = |axis: usize| {
             let sum: f64 = points
                 .iter()
@@ -352,6 +377,7 @@ impl StressFit {
             })
             .collect();
         Some(StressFit {
+            generic_zeta_n_m3,
             generic_rms_residual_n_m3: [rms(0), rms(1)],
             points,
             coefficients,
@@ -382,7 +408,7 @@ pub fn angles_fix_the_fit(angles_deg: &[(f64, f64)]) -> bool {
 }
 
 /// Singular values below this fraction of the largest make a fit's angles insufficient.
-const RANK_TOLERANCE: f64 = 1e-9;
+const RANK_TOLERANCE: f64 = 1e-6;
 
 #[cfg(test)]
 mod tests {
@@ -411,9 +437,13 @@ mod tests {
         let (fitted, [rms_x, rms_z]) = fit(&grid(&made)).unwrap();
         let pairs = [
             (made.a00, fitted.a00),
+            (made.a10, fitted.a10),
+            (made.b11, fitted.b11),
             (made.b01, fitted.b01),
             (made.bm11, fitted.bm11),
             (made.c11, fitted.c11),
+            (made.c01, fitted.c01),
+            (made.cm11, fitted.cm11),
             (made.d10, fitted.d10),
         ];
         for (a, b) in pairs {
@@ -470,6 +500,19 @@ mod tests {
         assert!((p.alpha_x_n_m3 - 0.5 / (2.0e-4 * 0.02)).abs() < 1e-6);
         assert!((p.depth_range_m[0] - 0.02).abs() < 1e-12);
         assert!((p.depth_range_m[1] - 0.03).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_probe_rises_towards_the_front_for_positive_beta() {
+        use rapier3d::glamx::{Quat, Vec3};
+        let probe = StressProbe::default();
+        for beta in [0.4f64, -0.9, 1.3] {
+            let m = probe_motion(&probe, [0.1, 0.05, 0.08], beta, 0.0, 0.3);
+            let chord = Quat::from_rotation_y(m.pitch_rad) * Vec3::X;
+            let expected = Vec3::new(libm::cos(beta) as f32, 0.0, libm::sin(beta) as f32);
+            assert!((chord - expected).length() < 1e-6, "{beta}: {chord:?}");
+            assert!(m.velocity_m_s[0] > 0.0, "gamma 0 moves along +x");
+        }
     }
 
     #[test]
