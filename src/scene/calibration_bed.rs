@@ -213,13 +213,13 @@ impl Scene {
             ));
         }
         let wall = std::time::Instant::now();
-        let angles: Vec<(f64, f64, bool)> = maps
-            .betas_deg
+        // The fitted points, then the checks.
+        let angles: Vec<(f64, f64, bool)> = fitted_angles
             .iter()
-            .flat_map(|&b| maps.gammas_deg.iter().map(move |&g| (b, g, true)))
+            .map(|&(b, g)| (b, g, true))
             .chain(maps.check_deg.iter().map(|&[b, g]| (b, g, false)))
             .collect();
-        let duration_s = c.settle_s + (maps.probe.travel_m / maps.probe.speed_m_s) as f64;
+        let duration_s = c.settle_s + (probe.travel_m / probe.speed_m_s) as f64;
         progress.plan(&vec![duration_s; angles.len()]);
         let (mut fitted, mut checked) = (Vec::new(), Vec::new());
         let mut material = String::new();
@@ -238,7 +238,7 @@ impl Scene {
             let point = measure_point(
                 &mut bed,
                 [0.5 * length, 0.5 * width, surface_z_m],
-                &maps.probe,
+                probe,
                 [beta_deg, gamma_deg],
                 self.config.coupling.friction,
             )?;
@@ -260,7 +260,7 @@ impl Scene {
             dx_m: dx_m as f64,
             particles,
             settled_surface_m: surface_z_m as f64,
-            probe: maps.probe.clone(),
+            probe: probe.clone(),
             fit,
             wall_time_s: wall.elapsed().as_secs_f64(),
         })
