@@ -8,6 +8,7 @@
 pub mod analysis;
 pub mod bag;
 pub mod bench;
+pub mod bench_rft;
 pub mod cli;
 pub mod config_error;
 pub mod coupling;

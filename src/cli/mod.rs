@@ -54,6 +54,8 @@ enum Command {
     DragBlade(tools::DragBladeArgs),
     /// Measure solver throughput on a 3D sand block collapsing under gravity.
     Bench(tools::BenchArgs),
+    /// Measure how much faster than real time the robot walks on RFT ground, bag recorded.
+    BenchRft(tools::BenchRftArgs),
 }
 
 /// Parses the command line, runs the command, and prints an error (with its causes) on stderr.
@@ -78,6 +80,7 @@ pub fn main() -> ExitCode {
         Command::CalibrateRft(args) => tools::calibrate_rft(args),
         Command::DragBlade(args) => tools::drag_blade(args),
         Command::Bench(args) => tools::bench(args),
+        Command::BenchRft(args) => tools::bench_rft(args),
     };
     if let Err(e) = &result {
         eprintln!("error: {e:#}");

@@ -78,6 +78,10 @@ pub struct CalibrateRftArgs {
     /// fitted to them (minutes).
     #[arg(long)]
     maps: bool,
+    /// With --maps: also write the maps, with the sand and grid they belong to, to FILE
+    /// (YAML), for a scene's terrain.rft.stress_maps.file.
+    #[arg(long, value_name = "FILE", requires = "maps")]
+    write: Option<PathBuf>,
     #[command(flatten)]
     threads: Threads,
     #[command(flatten)]
@@ -194,6 +198,26 @@ pub struct BenchArgs {
     json: Json,
 }
 
+/// `sandstep bench-rft`.
+#[derive(clap::Args)]
+pub struct BenchRftArgs {
+    /// Scene file (YAML) with a robot; run with terrain.model=rft.
+    #[arg(default_value = "config/robot_on_sand.yaml")]
+    scene: PathBuf,
+    /// Simulated time of each run (s).
+    #[arg(long, value_name = "S", default_value_t = 10.0)]
+    duration: f64,
+    /// Timed runs with the bag, each followed by one without (the bag's share).
+    #[arg(long, value_name = "N", default_value_t = 5)]
+    repeat: usize,
+    #[command(flatten)]
+    threads: Threads,
+    #[command(flatten)]
+    overrides: Overrides,
+    #[command(flatten)]
+    json: Json,
+}
+
 /// Analyses the bag (from `--start` on), writes plots with `--plots`, and prints the summary.
 pub fn analyze(args: AnalyzeArgs) -> anyhow::Result<()> {
     let opts = AnalysisOptions {
@@ -229,6 +253,9 @@ pub fn calibrate_rft(args: CalibrateRftArgs) -> anyhow::Result<()> {
     if args.maps {
         let progress = super::progress::Bars::progress(args.json.show_progress());
         let maps = scene.rft_stress_maps(&progress)?;
+        if let Some(path) = &args.write {
+            scene.write_stress_maps(&maps, path)?;
+        }
         if args.json.json {
             println!("{}", serde_json::to_string(&maps)?);
         } else {
@@ -329,6 +356,93 @@ fn stress_maps_table(maps: &crate::terrain::stress_map::StressMaps) -> String {
         ));
     }
     text
+}
+
+/// Times the robot on RFT ground, bag recorded (and not, interleaved), and prints the
+/// real-time factor's best and median.
+pub fn bench_rft(args: BenchRftArgs) -> anyhow::Result<()> {
+    use crate::bench_rft::{best_and_median, time_run};
+    args.threads.apply()?;
+    anyhow::ensure!(args.repeat >= 1, "--repeat must be at least 1");
+    super::options::check_duration(Some(args.duration))?;
+    let mut overrides = args.overrides.overrides.clone();
+    overrides.push("terrain.model=rft".into());
+    let scene = Scene::load(&args.scene, &overrides)?;
+    let rft = &scene.config.terrain.rft;
+    let law = rft.law();
+    let bag_root = tempfile::Builder::new()
+        .prefix("sandstep-bench-rft")
+        .tempdir()
+        .context("cannot make a folder for the bags")?;
+    let mut runs = Vec::new();
+    for i in 0..args.repeat {
+        let bag_dir = bag_root.path().join(format!("run{i}"));
+        for bag in [Some(bag_dir.as_path()), None] {
+            let run = time_run(&scene, args.duration, bag)?;
+            if !args.json.json {
+                eprintln!(
+                    "run {} {}: {:.3} s wall, {:.1}x real time",
+                    i + 1,
+                    if run.bag { "with bag" } else { "no bag  " },
+                    run.wall_time_s,
+                    run.real_time_factor()
+                );
+            }
+            runs.push(run);
+        }
+        std::fs::remove_dir_all(&bag_dir).ok();
+    }
+    let factors = |bag: bool| -> Vec<f64> {
+        runs.iter()
+            .filter(|r| r.bag == bag)
+            .map(|r| r.real_time_factor())
+            .collect()
+    };
+    let (best, median) = best_and_median(&factors(true)).context("no runs")?;
+    let (best_no_bag, median_no_bag) = best_and_median(&factors(false)).context("no runs")?;
+    let first = runs[0];
+    let step_ms = 1e3 * first.sim_time_s / first.steps.max(1) as f64;
+    let bag_mb_per_s = first.bag_bytes as f64 / 1e6 / first.sim_time_s;
+    if args.json.json {
+        let report = serde_json::json!({
+            "scene": scene.file,
+            "zeta_n_m3": law.zeta_n_m3(),
+            "stress_maps": rft.stress_maps.as_ref().map(|m| &m.file),
+            "step_s": step_ms / 1e3,
+            "runs": runs,
+            "real_time_factor_best": best,
+            "real_time_factor_median": median,
+            "real_time_factor_no_bag_best": best_no_bag,
+            "real_time_factor_no_bag_median": median_no_bag,
+            "bag_mb_per_sim_s": bag_mb_per_s,
+        });
+        println!("{report}");
+        return Ok(());
+    }
+    let maps = rft
+        .stress_maps
+        .as_ref()
+        .map_or("the generic shape".to_string(), |m| {
+            let law = match m.law {
+                crate::terrain::MapsLaw::Table => "table",
+                crate::terrain::MapsLaw::Fit => "fit",
+            };
+            format!("the stress maps {} ({law})", m.file.display())
+        });
+    println!(
+        "{}: RFT with {maps}, zeta {:.3e} N/m^3, {:.2} ms steps, {} runs of {} s simulated",
+        scene.file.display(),
+        law.zeta_n_m3(),
+        step_ms,
+        args.repeat,
+        args.duration,
+    );
+    println!(
+        "  with bag:    {best:.1}x real time best, {median:.1}x median \
+         ({bag_mb_per_s:.3} MB of bag per simulated s)"
+    );
+    println!("  without bag: {best_no_bag:.1}x real time best, {median_no_bag:.1}x median");
+    Ok(())
 }
 
 /// Times the sand substep on a collapsing block and prints particle-steps per second, per

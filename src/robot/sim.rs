@@ -100,6 +100,11 @@ pub struct RobotSim {
     yaw_change_rad: f64,
     last_yaw_rad: f64,
     efforts_n_m: [f64; LEG_COUNT],
+    /// Height of the rigid floor (m): `robot.ground.height_m`.
+    floor_height_m: f64,
+    /// Whether the robot's colliders and the floor take part in collision detection
+    /// ([`Self::set_floor_contacts`]).
+    floor_contacts: bool,
 }
 
 impl RobotSim {
@@ -211,6 +216,8 @@ impl RobotSim {
             yaw_change_rad: 0.0,
             last_yaw_rad: 0.0,
             efforts_n_m: [0.0; LEG_COUNT],
+            floor_height_m: cfg.ground.height_m,
+            floor_contacts: true,
         };
         sim.place_at_phase_zero(pose.clearance_m);
         sim.world.insert(
@@ -469,6 +476,27 @@ impl RobotSim {
     /// The rapier world, for coupling and inspection.
     pub fn world(&self) -> &PhysicsWorld {
         &self.world
+    }
+
+    /// Height of the rigid floor (m).
+    pub fn floor_height_m(&self) -> f64 {
+        self.floor_height_m
+    }
+
+    /// Turns the robot's contacts with the rigid floor on (the default) or off: off, rapier
+    /// leaves every collider (the robot's and the floor's) out of collision detection, which
+    /// is most of a step's cost on RFT ground. Only for terrains that act on the robot
+    /// without colliders, while the robot is far from the floor: the robot's links do not
+    /// collide with each other, so nothing else is lost. The colliders carry no mass (the
+    /// URDF's inertials do), so the robot's dynamics are unchanged.
+    pub fn set_floor_contacts(&mut self, enabled: bool) {
+        if enabled == self.floor_contacts {
+            return;
+        }
+        for (_, collider) in self.world.colliders.iter_mut() {
+            collider.set_enabled(enabled);
+        }
+        self.floor_contacts = enabled;
     }
 
     /// The rapier world, mutable (e.g. to add forces from the sand). Multibody links take

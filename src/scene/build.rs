@@ -43,6 +43,7 @@ pub fn validate(scene: &Scene) -> Result<(), SceneError> {
             materials.as_deref(),
         )
         .map_err(|e| SceneError::from(e.in_file(&scene.file)))?;
+    validate_stress_maps_sand(scene)?;
     if !(c.coupling.friction >= 0.0 && c.coupling.friction.is_finite()) {
         return Err(scene.invalid(
             "coupling.friction",
@@ -297,6 +298,31 @@ fn validate_body(
         }
     }
     Ok(())
+}
+
+/// Stress maps belong to the sand they were measured on: with a `sand` section, it must hold
+/// their material under the same name with the same settings.
+fn validate_stress_maps_sand(scene: &Scene) -> Result<(), SceneError> {
+    let (Some(choice), Some(sand)) = (&scene.config.terrain.rft.stress_maps, scene.sand()) else {
+        return Ok(());
+    };
+    let Some(file) = &choice.read else {
+        return Ok(());
+    };
+    let field = "terrain.rft.stress_maps.file";
+    let name = &file.material_name;
+    let measured: Option<super::config::MaterialConfig> =
+        serde_yaml_ng::from_value(file.material.clone()).ok();
+    let message = match sand.materials.get(name) {
+        None => format!("measured on material `{name}`, which sand.materials does not have"),
+        Some(here) if measured.as_ref() != Some(here) => format!(
+            "measured on material `{name}` as {:?}; this scene's `{name}` is {here:?}: measure \
+             the maps on this sand (`sandstep calibrate-rft <scene> --maps --write FILE`)",
+            file.material
+        ),
+        Some(_) => return Ok(()),
+    };
+    Err(scene.invalid(field, format!("{}: {message}", choice.file.display())))
 }
 
 impl Scene {

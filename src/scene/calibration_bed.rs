@@ -2,6 +2,8 @@
 //! walls (`terrain.rft.calibration`), on which [`crate::terrain::calibration`] presses its
 //! plate.
 
+use std::path::{Path, PathBuf};
+
 use super::config::{
     BodyConfig, BoxShape, DomainConfig, SandConfig, SolverConfig, WallConfig, WallsConfig,
 };
@@ -23,6 +25,9 @@ pub enum CalibrationError {
     /// An option of `sandstep drag-blade` out of range (the message names it).
     #[error("{0}")]
     Option(String),
+    /// The stress maps could not be written as a file.
+    #[error("cannot write the stress maps to {path}: {message}")]
+    WriteMaps { path: PathBuf, message: String },
 }
 
 /// Room above a stress-map bed for heaved sand, in plate chords.
@@ -289,5 +294,48 @@ impl Scene {
             samples,
             wall_time_s: wall.elapsed().as_secs_f64(),
         })
+    }
+
+    /// Writes `maps`, measured on this scene's sand, to `path` as a stress-map file
+    /// ([`crate::terrain::stress_map::StressMapFile`]) with the material's definition and a
+    /// comment on top saying what it is and how it was made.
+    pub fn write_stress_maps(
+        &self,
+        maps: &StressMaps,
+        path: &Path,
+    ) -> Result<(), CalibrationError> {
+        let fail = |message: String| CalibrationError::WriteMaps {
+            path: path.to_path_buf(),
+            message,
+        };
+        let material = self
+            .sand()
+            .and_then(|sand| sand.materials.get(&maps.material))
+            .ok_or_else(|| fail(format!("the scene has no material `{}`", maps.material)))?;
+        // Through text, so that f32 settings are written as they read (0.3, not 0.30000001).
+        let material = serde_yaml_ng::to_string(material)
+            .and_then(|text| serde_yaml_ng::from_str(&text))
+            .map_err(|e| fail(e.to_string()))?;
+        let file = maps.file(material).map_err(|e| {
+            fail(format!(
+                "terrain.rft.calibration.maps: the fitted angles do not form a table: {e}"
+            ))
+        })?;
+        let header = format!(
+            "# RFT stress maps of the MPM sand: material `{}` of {}, dx {} m, measured by\n\
+             # `sandstep calibrate-rft {} --maps --write {}` ({:.0} s of wall time).\n\
+             # Use: terrain.rft.stress_maps.file in a scene with this material. Angles in deg, \
+             alpha in N/m^3;\n\
+             # table rows are betas_deg, columns gammas_deg (docs/physics.md, \"Stress maps\").\n",
+            maps.material,
+            maps.scene,
+            maps.dx_m as f32,
+            maps.scene,
+            path.display(),
+            maps.wall_time_s
+        );
+        let body = serde_yaml_ng::to_string(&file).map_err(|e| fail(e.to_string()))?;
+        crate::files::write_atomically(path, (header + &body).as_bytes())
+            .map_err(|e| fail(e.to_string()))
     }
 }

@@ -273,8 +273,9 @@ impl Default for SolverConfig {
     }
 }
 
-/// A material, chosen by `model`.
-#[derive(Clone, Debug, Deserialize)]
+/// A material, chosen by `model`. Serialized into the stress maps measured on it
+/// (`sandstep calibrate-rft --maps --write`), which name the sand they belong to.
+#[derive(Clone, Debug, PartialEq, Deserialize, serde::Serialize)]
 #[serde(tag = "model", rename_all = "snake_case", deny_unknown_fields)]
 pub enum MaterialConfig {
     /// Dry sand: Hencky St. Venant-Kirchhoff elasticity with Drucker-Prager plasticity (Klar et

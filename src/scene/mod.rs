@@ -53,8 +53,8 @@ impl Scene {
 
     /// Parses scene text; `file` is only used to name the source in errors.
     pub fn from_yaml(text: &str, file: &Path, overrides: &[String]) -> Result<Scene, SceneError> {
-        let config: SceneConfig =
-            overrides::deserialize_with_overrides(text, overrides).map_err(|e| match e {
+        let mut config: SceneConfig = overrides::deserialize_with_overrides(text, overrides)
+            .map_err(|e| match e {
                 overrides::YamlProblem::Parse(message) => ConfigError::Parse {
                     file: file.to_path_buf(),
                     message,
@@ -62,6 +62,11 @@ impl Scene {
                 .into(),
                 overrides::YamlProblem::Override(e) => e,
             })?;
+        config
+            .terrain
+            .rft
+            .read_stress_maps()
+            .map_err(|e| e.in_file(file))?;
         let scene = Scene {
             file: file.to_path_buf(),
             config,

@@ -233,7 +233,7 @@ pub fn run_simulation_observed(
             json!(sinkage_sum / frames_done.max(1) as f64),
         );
         metrics.insert("robot_mass_kg".into(), json!(robot.total_mass_kg()));
-        metrics.insert("zeta_n_m3".into(), json!(terrain.params().zeta_n_m3));
+        metrics.insert("zeta_n_m3".into(), json!(terrain.params().law.zeta_n_m3()));
     }
     Ok(RunSummary::of_simulation(
         &config.name,

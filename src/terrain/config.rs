@@ -6,9 +6,12 @@
 //! `sandstep calibrate-rft` reads its material), and the rigid floor `robot.ground.height_m`
 //! stays the bed's bottom.
 
+use std::path::PathBuf;
+
 use serde::Deserialize;
 
-use super::stress_map::StressProbe;
+use super::stress_law::StressLaw;
+use super::stress_map::{StressMapFile, StressProbe};
 use crate::config_error::FieldError;
 
 /// Default medium scale zeta (N/m^3): `sandstep calibrate-rft config/robot_on_sand.yaml`,
@@ -49,9 +52,12 @@ pub enum TerrainModel {
 #[serde(deny_unknown_fields, default)]
 pub struct RftConfig {
     /// Medium scale zeta: vertical stress per unit depth under a horizontal plate pressed
-    /// straight down (N/m^3), > 0. Default [`DEFAULT_ZETA_N_M3`], calibrated on the default
-    /// sand.
+    /// straight down (N/m^3), > 0, of Li et al.'s generic shape. Default
+    /// [`DEFAULT_ZETA_N_M3`], calibrated on the default sand. Not used with `stress_maps`.
     pub zeta_n_m3: f64,
+    /// The stress law from stress maps measured on the MPM sand instead of the generic shape
+    /// ([`StressMapsChoice`]). Default none.
+    pub stress_maps: Option<StressMapsChoice>,
     /// Height of the flat sand surface (m), at or above `robot.ground.height_m`. Default 0
     /// (the robot starts just above z = 0 in every scene).
     pub surface_height_m: f64,
@@ -61,8 +67,9 @@ pub struct RftConfig {
     /// Regularisation speed v_ref (m/s), > 0: an element slower than this feels the fraction
     /// |v| / v_ref of its RFT force. Default 0.01.
     pub reference_speed_m_s: f64,
-    /// The rapier step with RFT forces: `auto` (the default, [`RftStep::seconds`]) or a
-    /// number of seconds in (0, 0.01]. The forces and their implicit terms are computed once
+    /// The rapier step with RFT forces: `auto` (the default: [`RftStep::seconds`] on the
+    /// generic shape, [`RFT_AUTO_MAPS_DT_S`] with stress maps) or a number of seconds in
+    /// (0, 0.01]. The forces and their implicit terms are computed once
     /// per step; `robot.physics.max_dt_s` does not apply.
     pub max_dt_s: RftStep,
     /// The MPM plate test of `sandstep calibrate-rft`.
@@ -73,6 +80,7 @@ impl Default for RftConfig {
     fn default() -> Self {
         RftConfig {
             zeta_n_m3: DEFAULT_ZETA_N_M3,
+            stress_maps: None,
             surface_height_m: 0.0,
             element_size_m: 0.005,
             reference_speed_m_s: 0.01,
@@ -91,6 +99,14 @@ pub const RFT_AUTO_MAX_DT_S: f64 = 0.008;
 /// hexapod at 2 Hz (speed over 4 s within 2 % of 0.25 ms steps): 4 ms at zeta = 3e6, 1 ms at
 /// 4.46e7 (3.5 %; 2 ms is 12 % off). docs/physics.md, "Resistive force theory".
 pub const RFT_AUTO_STEP_SQRT_ZETA: f64 = 6.9;
+
+/// The `auto` step with stress maps (s). Their laws are not the generic shape scaled, so
+/// [`RFT_AUTO_STEP_SQRT_ZETA`] does not carry over: on the shipped sand's table (zeta 3.1e6,
+/// which that rule would step at 3.9 ms), 3.3 ms steps walked the C-legs 9 % slower than
+/// 0.25 ms steps at 4 Hz; 1 ms steps were within 2 % for C-legs and 4 % for reversed legs at
+/// 1, 2 and 4 Hz (the fitted form: within 1.5 % for C-legs at 1 and 2 Hz, 11 % at 4 Hz,
+/// where its walk is sensitive to the step). docs/physics.md, "Stress maps".
+pub const RFT_AUTO_MAPS_DT_S: f64 = 0.001;
 
 /// Largest accepted RFT step (s), as for rapier's steps on rigid ground.
 pub const RFT_MAX_DT_S: f64 = 0.01;
@@ -122,16 +138,87 @@ impl RftStep {
     }
 }
 
+/// `terrain.rft.stress_maps`: RFT's stress law from a stress-map file, written by `sandstep
+/// calibrate-rft <scene> --maps --write FILE` ([`StressMapFile`]).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StressMapsChoice {
+    /// The file (YAML), relative to the working directory, e.g.
+    /// `config/stress_maps/sand_dx10mm.yaml`. Required.
+    pub file: PathBuf,
+    /// Which law: `table` (the measured points, interpolated bilinearly; the default) or
+    /// `fit` (the generic Fourier form fitted to them).
+    #[serde(default)]
+    pub law: MapsLaw,
+    /// The file as read when the scene was loaded ([`RftConfig::read_stress_maps`]).
+    #[serde(skip)]
+    pub read: Option<Box<StressMapFile>>,
+}
+
+/// `terrain.rft.stress_maps.law`.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum MapsLaw {
+    /// The measured points, bilinear in beta and gamma.
+    #[default]
+    Table,
+    /// The nine-coefficient Fourier form fitted to the points.
+    Fit,
+}
+
 impl RftConfig {
-    /// The rapier step with RFT forces (s), `max_dt_s` resolved.
+    /// Reads the `stress_maps` file, if any, into the configuration; errors name the field
+    /// and the problem (missing file, malformed YAML, a table that cannot be used).
+    pub fn read_stress_maps(&mut self) -> Result<(), FieldError> {
+        let Some(choice) = &mut self.stress_maps else {
+            return Ok(());
+        };
+        let field = "terrain.rft.stress_maps.file";
+        let problem = |message: String| {
+            FieldError::new(field, format!("{}: {message}", choice.file.display()))
+        };
+        let text = std::fs::read_to_string(&choice.file).map_err(|e| {
+            problem(format!(
+                "{e} (`sandstep calibrate-rft <scene> --maps --write FILE` writes one)"
+            ))
+        })?;
+        let file: StressMapFile = serde_yaml_ng::from_str(&text)
+            .map_err(|e| problem(format!("not a stress-map file: {e}")))?;
+        file.table
+            .check()
+            .map_err(|e| problem(format!("table.{e}")))?;
+        choice.read = Some(Box::new(file));
+        Ok(())
+    }
+
+    /// The stress law: the generic shape scaled by `zeta_n_m3`, or the stress maps' as read
+    /// by [`Self::read_stress_maps`] (the generic shape if they were not read).
+    pub fn law(&self) -> StressLaw {
+        match self
+            .stress_maps
+            .as_ref()
+            .and_then(|c| Some((c.law, c.read.as_ref()?)))
+        {
+            Some((MapsLaw::Table, file)) => StressLaw::Table(file.table.clone()),
+            Some((MapsLaw::Fit, file)) => StressLaw::fitted(&file.coefficients),
+            None => StressLaw::generic(self.zeta_n_m3),
+        }
+    }
+
+    /// The rapier step with RFT forces (s), `max_dt_s` resolved: `auto` is
+    /// [`RftStep::seconds`] on the generic shape's zeta, [`RFT_AUTO_MAPS_DT_S`] with stress
+    /// maps.
     pub fn step_s(&self) -> f64 {
-        self.max_dt_s.seconds(self.zeta_n_m3)
+        match (self.max_dt_s, &self.stress_maps) {
+            (RftStep::Auto(_), Some(_)) => RFT_AUTO_MAPS_DT_S,
+            (step, _) => step.seconds(self.zeta_n_m3),
+        }
     }
 
     /// The parameters of the RFT terrain model.
     pub fn params(&self) -> RftParams {
         RftParams {
-            zeta_n_m3: self.zeta_n_m3,
+            law: self.law(),
             surface_height_m: self.surface_height_m,
             element_size_m: self.element_size_m,
             reference_speed_m_s: self.reference_speed_m_s,
@@ -435,11 +522,10 @@ fn validate_maps(m: &StressMapConfig) -> Result<(), FieldError> {
 }
 
 /// The RFT medium and how bodies are discretised.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct RftParams {
-    /// Medium scale zeta: vertical stress per unit depth under a horizontal plate pressed
-    /// straight down (N/m^3), > 0.
-    pub zeta_n_m3: f64,
+    /// The medium's stress law ([`super::stress_law`]).
+    pub law: StressLaw,
     /// Height of the flat free surface (m): depth is measured from it.
     pub surface_height_m: f64,
     /// Longest edge of a surface element (m), > 0; also the thickness below which a box is a

@@ -6,6 +6,8 @@
 //!   resistance is local and rate independent, hundreds of times cheaper than MPM.
 //! - [`plate`] and [`calibration`]: a plate pressed into MPM sand, and the fit of RFT's scale
 //!   zeta to it (`sandstep calibrate-rft`).
+//! - [`stress_law`]: RFT's stress law alpha(beta, gamma): the generic shape, fitted
+//!   coefficients or a measured table, extended to every angle by RFT's symmetries.
 //! - [`stress_map`]: RFT's stress per unit depth over attack and intrusion angle, measured on
 //!   MPM sand with a leg-sized plate and fitted (`sandstep calibrate-rft --maps`).
 //!
@@ -16,9 +18,10 @@ pub mod calibration;
 pub mod config;
 pub mod plate;
 pub mod rft;
+pub mod stress_law;
 pub mod stress_map;
 
 pub use config::{
-    RftCalibrationConfig, RftConfig, RftParams, RftStep, TerrainConfig, TerrainModel,
-    DEFAULT_ZETA_N_M3, POPPY_SEEDS_ZETA_N_M3,
+    MapsLaw, RftCalibrationConfig, RftConfig, RftParams, RftStep, StressMapsChoice, TerrainConfig,
+    TerrainModel, DEFAULT_ZETA_N_M3, POPPY_SEEDS_ZETA_N_M3,
 };

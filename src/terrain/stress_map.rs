@@ -5,7 +5,7 @@
 //! centre. Here the plate is leg-sized and a CPIC sheet ([`super::plate`]), moved through a
 //! settled bed of the scene's sand; the force is fitted over the travel after it has built up.
 //!
-//! The maps are fitted with the generic Fourier form of [`super::rft::generic`], its nine
+//! The maps are fitted with the generic Fourier form of [`super::stress_law`], its nine
 //! coefficients free (N/m^3), by linear least squares: `alpha_z` on `1, cos 2b, sin(2b + g),
 //! sin g, sin(-2b + g)` and `alpha_x` on `cos(2b + g), cos g, sin(-2b + g), sin 2b`.
 
@@ -13,6 +13,8 @@ use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 use super::plate::{move_plate_forces, PlateForceSample, PlateMotion};
+pub use super::stress_law::StressCoefficients;
+use super::stress_law::{fourier_basis, StressTable, TableError, GENERIC};
 use crate::mpm::{SimError, Solver};
 
 /// The plate and its motion for one point of the maps.
@@ -161,74 +163,11 @@ fn alpha_of(
     }
 }
 
-/// The nine coefficients of the generic form, in N/m^3 (module docs).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct StressCoefficients {
-    /// `alpha_z`'s constant term.
-    pub a00: f64,
-    /// `alpha_z`'s `cos 2b` term.
-    pub a10: f64,
-    /// `alpha_z`'s `sin(2b + g)` term.
-    pub b11: f64,
-    /// `alpha_z`'s `sin g` term.
-    pub b01: f64,
-    /// `alpha_z`'s `sin(-2b + g)` term.
-    pub bm11: f64,
-    /// `alpha_x`'s `cos(2b + g)` term.
-    pub c11: f64,
-    /// `alpha_x`'s `cos g` term.
-    pub c01: f64,
-    /// `alpha_x`'s `sin(-2b + g)` term.
-    pub cm11: f64,
-    /// `alpha_x`'s `sin 2b` term.
-    pub d10: f64,
-}
-
-impl StressCoefficients {
-    /// Li et al.'s generic coefficients times `zeta_n_m3`.
-    pub fn generic(zeta_n_m3: f64) -> Self {
-        use super::rft::generic::*;
-        StressCoefficients {
-            a00: A00 * zeta_n_m3,
-            a10: A10 * zeta_n_m3,
-            b11: B11 * zeta_n_m3,
-            b01: B01 * zeta_n_m3,
-            bm11: BM11 * zeta_n_m3,
-            c11: C11 * zeta_n_m3,
-            c01: C01 * zeta_n_m3,
-            cm11: CM11 * zeta_n_m3,
-            d10: D10 * zeta_n_m3,
-        }
-    }
-
-    /// `(alpha_x, alpha_z)` (N/m^3) at `beta_rad`, `gamma_rad` in the fitted range.
-    pub fn alpha(&self, beta_rad: f64, gamma_rad: f64) -> (f64, f64) {
-        let [z_basis, x_basis] = basis(beta_rad, gamma_rad);
-        let z = [self.a00, self.a10, self.b11, self.b01, self.bm11];
-        let x = [self.c11, self.c01, self.cm11, self.d10];
-        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(p, q)| p * q).sum::<f64>();
-        (dot(&x, &x_basis[..4]), dot(&z, &z_basis))
-    }
-
-    /// The scale zeta these coefficients give: `alpha_z(0, 90 deg)`, the stress per unit depth
-    /// under a horizontal plate pressed straight down (N/m^3).
-    pub fn zeta_n_m3(&self) -> f64 {
-        self.alpha(0.0, std::f64::consts::FRAC_PI_2).1
-    }
-}
-
-/// The generic form's functions at (beta, gamma): five for alpha_z, four for alpha_x (the
-/// fifth entry unused).
+/// The generic form's functions at (beta, gamma) ([`fourier_basis`]).
 fn basis(beta: f64, gamma: f64) -> [[f64; 5]; 2] {
     let (sin_2b, cos_2b) = libm::sincos(2.0 * beta);
     let (sin_g, cos_g) = libm::sincos(gamma);
-    let sin_sum = sin_2b * cos_g + cos_2b * sin_g;
-    let cos_sum = cos_2b * cos_g - sin_2b * sin_g;
-    let sin_diff = sin_g * cos_2b - cos_g * sin_2b;
-    [
-        [1.0, cos_2b, sin_sum, sin_g, sin_diff],
-        [cos_sum, cos_g, sin_diff, sin_2b, 0.0],
-    ]
+    fourier_basis(cos_2b, sin_2b, cos_g, sin_g)
 }
 
 /// The least-squares fit of the generic form to `points`, and its root-mean-square residuals
@@ -303,6 +242,86 @@ pub struct StressMaps {
     pub wall_time_s: f64,
 }
 
+/// A sand's stress maps as RFT reads them (`terrain.rft.stress_maps.file`), written by
+/// `sandstep calibrate-rft <scene> --maps --write FILE` (YAML): the measured table and its
+/// fit, with the sand and grid they were measured on.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StressMapFile {
+    /// The scene file the sand came from.
+    pub scene: String,
+    /// The material's name in that scene.
+    pub material_name: String,
+    /// The material as that scene defined it (its `sand.materials` entry): a scene using these
+    /// maps must have a material of this name with exactly these settings.
+    pub material: serde_yaml_ng::Value,
+    /// Grid spacing of the MPM beds (m).
+    pub dx_m: f32,
+    /// The plate and its motion.
+    pub probe: StressProbe,
+    /// The measured alpha (N/m^3) on the grid of angles, to [`FILE_DIGITS`] significant
+    /// digits.
+    pub table: StressTable,
+    /// The generic form fitted to the table (N/m^3).
+    pub coefficients: StressCoefficients,
+    /// Root-mean-square residual of the fit, `[alpha_x, alpha_z]` (N/m^3).
+    pub rms_residual_n_m3: [f64; 2],
+}
+
+/// Significant digits of the values in a stress-map file: the measurement's noise is far
+/// above the fourth digit.
+pub const FILE_DIGITS: usize = 4;
+
+/// `v` to [`FILE_DIGITS`] significant digits.
+fn significant(v: f64) -> f64 {
+    format!("{v:.*e}", FILE_DIGITS - 1).parse().unwrap_or(v)
+}
+
+impl StressMaps {
+    /// The maps as a file, with `material` (the scene's definition of [`Self::material`]).
+    /// The fitted points must form a grid of betas and gammas a [`StressTable`] can hold.
+    pub fn file(&self, material: serde_yaml_ng::Value) -> Result<StressMapFile, TableError> {
+        let points = &self.fit.points;
+        let sorted = |angle: fn(&StressPoint) -> f64| {
+            let mut v: Vec<f64> = points.iter().map(angle).collect();
+            v.sort_by(f64::total_cmp);
+            v.dedup();
+            v
+        };
+        let betas_deg = sorted(|p| p.beta_deg);
+        let gammas_deg = sorted(|p| p.gamma_deg);
+        let mut rows = [
+            vec![vec![f64::NAN; gammas_deg.len()]; betas_deg.len()],
+            vec![vec![f64::NAN; gammas_deg.len()]; betas_deg.len()],
+        ];
+        for p in points {
+            let i = betas_deg.partition_point(|&b| b < p.beta_deg);
+            let j = gammas_deg.partition_point(|&g| g < p.gamma_deg);
+            rows[0][i][j] = significant(p.alpha_x_n_m3);
+            rows[1][i][j] = significant(p.alpha_z_n_m3);
+        }
+        let [alpha_x_n_m3, alpha_z_n_m3] = rows;
+        let table = StressTable {
+            betas_deg,
+            gammas_deg,
+            alpha_x_n_m3,
+            alpha_z_n_m3,
+        };
+        // A missing (beta, gamma) pair is left NaN, which the check names.
+        table.check()?;
+        Ok(StressMapFile {
+            scene: self.scene.clone(),
+            material_name: self.material.clone(),
+            material,
+            dx_m: self.dx_m as f32,
+            probe: self.probe.clone(),
+            table,
+            coefficients: self.fit.coefficients.map(significant),
+            rms_residual_n_m3: self.fit.rms_residual_n_m3.map(significant),
+        })
+    }
+}
+
 /// The generic form fitted to measured points, and checked on others.
 #[derive(Clone, Debug, Serialize)]
 pub struct StressFit {
@@ -339,7 +358,7 @@ impl StressFit {
         let (coefficients, rms_residual_n_m3) = fit(&points)?;
         let zeta_n_m3 = coefficients.zeta_n_m3();
         // The generic shape's best scale: sum(shape x measured) / sum(shape^2).
-        let unit = StressCoefficients::generic(1.0);
+        let unit = GENERIC;
         let (mut shape_measured, mut shape_sq) = (0.0, 0.0);
         for p in &points {
             let (x, z) = unit.alpha(p.beta_deg.to_radians(), p.gamma_deg.to_radians());
@@ -347,7 +366,7 @@ impl StressFit {
             shape_sq += x * x + z * z;
         }
         let generic_zeta_n_m3 = shape_measured / shape_sq;
-        let generic = StressCoefficients::generic(generic_zeta_n_m3);
+        let generic = GENERIC.scaled(generic_zeta_n_m3);
         let rms = |axis: usize| {
             let sum: f64 = points
                 .iter()
@@ -390,7 +409,7 @@ impl StressFit {
 
 /// Whether points at these angles (deg) fix the nine coefficients.
 pub fn angles_fix_the_fit(angles_deg: &[(f64, f64)]) -> bool {
-    let generic = StressCoefficients::generic(1.0);
+    let generic = GENERIC;
     let points: Vec<StressPoint> = angles_deg
         .iter()
         .map(|&(beta_deg, gamma_deg)| {
@@ -433,7 +452,7 @@ mod tests {
 
     #[test]
     fn the_fit_recovers_the_coefficients_it_was_made_from() {
-        let made = StressCoefficients::generic(2.0e6);
+        let made = GENERIC.scaled(2.0e6);
         let (fitted, [rms_x, rms_z]) = fit(&grid(&made)).unwrap();
         let pairs = [
             (made.a00, fitted.a00),
@@ -459,18 +478,8 @@ mod tests {
     }
 
     #[test]
-    fn the_generic_coefficients_give_the_rft_module_s_alpha() {
-        let generic = StressCoefficients::generic(1.0);
-        for (beta, gamma) in [(0.3, 0.2), (-0.7, 1.1), (1.2, -0.4)] {
-            let (x, z) = generic.alpha(beta, gamma);
-            let (x_rft, z_rft) = super::super::rft::alpha(beta, gamma);
-            assert!((x - x_rft).abs() < 1e-12 && (z - z_rft).abs() < 1e-12);
-        }
-    }
-
-    #[test]
     fn too_few_or_degenerate_angles_give_no_fit() {
-        let points = grid(&StressCoefficients::generic(1.0));
+        let points = grid(&GENERIC);
         assert!(fit(&points[..4]).is_none());
         // One gamma only: sin g and the constant cannot be told apart.
         let one_gamma: Vec<StressPoint> = points

@@ -12,6 +12,11 @@ use crate::terrain::rft::RftTerrain;
 
 /// A frame that is a whole number of RFT steps up to this relative round-off takes that number.
 const STEP_COUNT_SLACK: f64 = 1e-6;
+/// On RFT ground the robot's collisions with the rigid floor are detected only while an
+/// element of it may come within this distance (m) of the floor, plus one element size (an
+/// element's centre is within that of its collider's surface); farther away no contact can
+/// form in a step.
+const FLOOR_CONTACT_MARGIN_M: f64 = 0.01;
 /// Sand substeps end within this much of the frame's end (s).
 const FRAME_END_TOLERANCE_S: f64 = 1e-12;
 
@@ -170,6 +175,11 @@ impl Terrain {
                     .collect()
             }
             Terrain::Rft(rft) => {
+                // RFT needs no colliders: collision detection, most of a rapier step's cost
+                // here, is only for the rigid floor, and only when the robot may reach it.
+                let lowest = rft.terrain.lowest_reach_m(&robot.world().bodies, dt_s);
+                let margin = rft.terrain.params().element_size_m + FLOOR_CONTACT_MARGIN_M;
+                robot.set_floor_contacts(lowest - robot.floor_height_m() < margin);
                 let world = robot.world_mut();
                 let wrenches =
                     rft.terrain
