@@ -11,6 +11,7 @@ use rapier3d::prelude::{ColliderBuilder, ColliderSet, RigidBodyBuilder, RigidBod
 use sandstep::scene::{Scene, Simulation};
 use sandstep::terrain::rft::RftTerrain;
 use sandstep::terrain::stress_law::StressLaw;
+use sandstep::terrain::POPPY_SEEDS_ZETA_N_M3;
 
 const SCENE: &str = "config/robot_on_sand.yaml";
 /// The stress maps of the shipped sand at the robot's 1 cm grid.
@@ -424,4 +425,34 @@ fn on_the_sand_s_stress_maps_c_legs_outwalk_reversed_legs() {
         "C {c_legs} vs reversed {reversed}"
     );
     assert!(c_legs > 0.05, "the robot walks: {c_legs} m/s");
+}
+
+/// The robot's collisions with the rigid floor are off only while it is far from the floor:
+/// on soft RFT sand (poppy seeds) 2 mm deep, the legs stand on the floor under it instead of
+/// sinking through.
+#[test]
+fn on_shallow_rft_sand_the_legs_stand_on_the_floor() {
+    let floor_m = scene(&[]).config.robot.unwrap().ground.height_m;
+    let surface_m = floor_m + 0.002;
+    let mut sim = Simulation::new(&rft_scene(&[
+        format!("terrain.rft.surface_height_m={surface_m}"),
+        format!("terrain.rft.zeta_n_m3={POPPY_SEEDS_ZETA_N_M3}"),
+    ]))
+    .unwrap();
+    let mut lowest_m = f64::INFINITY;
+    let mut t = 0.0;
+    while t < 1.5 {
+        t += FRAME_S;
+        sim.advance_to(t).unwrap();
+        lowest_m = lowest_m.min(surface_m - sim.leg_sinkage_m().unwrap());
+    }
+    println!("floor {floor_m} m, sand surface {surface_m} m, lowest leg point {lowest_m:.4} m");
+    // The robot lands on it from 6 cm: rapier's contact lets the thin legs 6.5 mm into the
+    // floor, as much as with the contacts always on; with them off, 26 mm (2026-12-08).
+    assert!(
+        lowest_m > floor_m - 0.01,
+        "a leg went {} mm through the floor",
+        (floor_m - lowest_m) * 1e3
+    );
+    assert!(lowest_m < surface_m, "the legs must reach into the sand");
 }

@@ -251,6 +251,14 @@ pub fn calibrate_rft(args: CalibrateRftArgs) -> anyhow::Result<()> {
     args.threads.apply()?;
     let scene = Scene::load(&args.scene, &args.overrides.overrides)?;
     if args.maps {
+        if args.write.is_some() {
+            let maps = &scene.config.terrain.rft.calibration.maps;
+            crate::terrain::stress_map::check_table_grid(&maps.betas_deg, &maps.gammas_deg)
+                .context(
+                    "--write: the angles of terrain.rft.calibration.maps do not form a table \
+                     (betas within one period of 180 deg, gammas from -90 to 90 deg)",
+                )?;
+        }
         let progress = super::progress::Bars::progress(args.json.show_progress());
         let maps = scene.rft_stress_maps(&progress)?;
         if let Some(path) = &args.write {
@@ -401,14 +409,14 @@ pub fn bench_rft(args: BenchRftArgs) -> anyhow::Result<()> {
     let (best, median) = best_and_median(&factors(true)).context("no runs")?;
     let (best_no_bag, median_no_bag) = best_and_median(&factors(false)).context("no runs")?;
     let first = runs[0];
-    let step_ms = 1e3 * first.sim_time_s / first.steps.max(1) as f64;
+    let step_s = first.sim_time_s / first.steps.max(1) as f64;
     let bag_mb_per_s = first.bag_bytes as f64 / 1e6 / first.sim_time_s;
     if args.json.json {
         let report = serde_json::json!({
             "scene": scene.file,
             "zeta_n_m3": law.zeta_n_m3(),
             "stress_maps": rft.stress_maps.as_ref().map(|m| &m.file),
-            "step_s": step_ms / 1e3,
+            "step_s": step_s,
             "runs": runs,
             "real_time_factor_best": best,
             "real_time_factor_median": median,
@@ -433,7 +441,7 @@ pub fn bench_rft(args: BenchRftArgs) -> anyhow::Result<()> {
         "{}: RFT with {maps}, zeta {:.3e} N/m^3, {:.2} ms steps, {} runs of {} s simulated",
         scene.file.display(),
         law.zeta_n_m3(),
-        step_ms,
+        step_s * 1e3,
         args.repeat,
         args.duration,
     );

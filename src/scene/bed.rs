@@ -54,7 +54,7 @@ fn to_f64(v: Vec3) -> [f64; 3] {
 
 /// A collider's world pose and bounding box. World poses of colliders are synchronised only by
 /// a step: they are composed here from the body's.
-pub(crate) fn world_aabb(body: &RigidBody, collider: &Collider) -> (Pose, Aabb) {
+fn world_aabb(body: &RigidBody, collider: &Collider) -> (Pose, Aabb) {
     let pose = *body.position() * collider.position_wrt_parent().copied().unwrap_or_default();
     (pose, collider.shape().compute_aabb(&pose))
 }

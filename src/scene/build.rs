@@ -311,18 +311,55 @@ fn validate_stress_maps_sand(scene: &Scene) -> Result<(), SceneError> {
     };
     let field = "terrain.rft.stress_maps.file";
     let name = &file.material_name;
-    let measured: Option<super::config::MaterialConfig> =
-        serde_yaml_ng::from_value(file.material.clone()).ok();
     let message = match sand.materials.get(name) {
         None => format!("measured on material `{name}`, which sand.materials does not have"),
-        Some(here) if measured.as_ref() != Some(here) => format!(
-            "measured on material `{name}` as {:?}; this scene's `{name}` is {here:?}: measure \
-             the maps on this sand (`sandstep calibrate-rft <scene> --maps --write FILE`)",
-            file.material
-        ),
-        Some(_) => return Ok(()),
+        Some(here) => match differing_settings(&file.material, here) {
+            Ok(differing) if differing.is_empty() => return Ok(()),
+            Ok(differing) => format!(
+                "measured on material `{name}` with other settings ({}); measure the maps on \
+                 this sand (`sandstep calibrate-rft <scene> --maps --write FILE`)",
+                differing.join(", ")
+            ),
+            Err(e) => format!("its material `{name}` cannot be read: {e}"),
+        },
     };
     Err(scene.invalid(field, format!("{}: {message}", choice.file.display())))
+}
+
+/// The settings of `here` that differ from the material `measured` as a stress-map file holds
+/// it: `name: measured -> here` for each (the measured one read back as a material first, so
+/// that a malformed one is an error and defaults compare as values).
+fn differing_settings(
+    measured: &serde_yaml_ng::Value,
+    here: &super::config::MaterialConfig,
+) -> Result<Vec<String>, serde_yaml_ng::Error> {
+    let measured: super::config::MaterialConfig = serde_yaml_ng::from_value(measured.clone())?;
+    if measured == *here {
+        return Ok(Vec::new());
+    }
+    let as_map = |m: &super::config::MaterialConfig| match serde_yaml_ng::to_value(m) {
+        Ok(serde_yaml_ng::Value::Mapping(map)) => map,
+        _ => Default::default(),
+    };
+    let (measured, here) = (as_map(&measured), as_map(here));
+    let text = |v: Option<&serde_yaml_ng::Value>| {
+        v.and_then(|v| serde_yaml_ng::to_string(v).ok())
+            .map_or("none".into(), |s| s.trim().to_string())
+    };
+    let mut keys: Vec<&serde_yaml_ng::Value> = Vec::new();
+    for key in measured.keys().chain(here.keys()) {
+        if !keys.contains(&key) {
+            keys.push(key);
+        }
+    }
+    Ok(keys
+        .into_iter()
+        .filter(|k| measured.get(*k) != here.get(*k))
+        .map(|k| {
+            let name = k.as_str().unwrap_or("?");
+            format!("{name}: {} -> {}", text(measured.get(k)), text(here.get(k)))
+        })
+        .collect())
 }
 
 impl Scene {

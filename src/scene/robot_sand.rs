@@ -59,20 +59,14 @@ pub fn robot_coupling(
     })
 }
 
-/// Depth (m) of the deepest leg point below `surface_z`, or 0. From the bodies' poses: the
-/// colliders' own are stale while the robot's contacts are off
-/// ([`RobotSim::set_floor_contacts`]).
+/// Depth (m) of the deepest leg point below `surface_z`, or 0.
 pub fn leg_sinkage_m(robot: &RobotSim, surface_z: f32) -> f64 {
     let world = robot.world();
     let lowest = robot
         .leg_handles()
         .iter()
-        .flat_map(|&h| {
-            let body = &world.bodies[h];
-            body.colliders()
-                .iter()
-                .map(move |&c| super::bed::world_aabb(body, &world.colliders[c]).1.mins.z)
-        })
+        .flat_map(|&h| world.bodies[h].colliders().iter().copied())
+        .map(|c| world.colliders[c].compute_aabb().mins.z)
         .fold(f32::INFINITY, f32::min);
     (surface_z - lowest).max(0.0) as f64
 }

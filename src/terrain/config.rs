@@ -187,18 +187,19 @@ impl RftConfig {
         file.table
             .check()
             .map_err(|e| problem(format!("table.{e}")))?;
+        file.coefficients
+            .check()
+            .map_err(|e| problem(format!("coefficients.{e}")))?;
         choice.read = Some(Box::new(file));
         Ok(())
     }
 
     /// The stress law: the generic shape scaled by `zeta_n_m3`, or the stress maps' as read
-    /// by [`Self::read_stress_maps`] (the generic shape if they were not read).
+    /// by [`Self::read_stress_maps`], which every scene load does ([`crate::scene::Scene`]).
+    /// A configuration built otherwise, its maps not read, has the generic shape's law and
+    /// step alike.
     pub fn law(&self) -> StressLaw {
-        match self
-            .stress_maps
-            .as_ref()
-            .and_then(|c| Some((c.law, c.read.as_ref()?)))
-        {
+        match self.read_maps() {
             Some((MapsLaw::Table, file)) => StressLaw::Table(file.table.clone()),
             Some((MapsLaw::Fit, file)) => StressLaw::fitted(&file.coefficients),
             None => StressLaw::generic(self.zeta_n_m3),
@@ -209,10 +210,16 @@ impl RftConfig {
     /// [`RftStep::seconds`] on the generic shape's zeta, [`RFT_AUTO_MAPS_DT_S`] with stress
     /// maps.
     pub fn step_s(&self) -> f64 {
-        match (self.max_dt_s, &self.stress_maps) {
+        match (self.max_dt_s, self.read_maps()) {
             (RftStep::Auto(_), Some(_)) => RFT_AUTO_MAPS_DT_S,
             (step, _) => step.seconds(self.zeta_n_m3),
         }
+    }
+
+    /// The stress-map file as read ([`Self::read_stress_maps`]), with its law.
+    fn read_maps(&self) -> Option<(MapsLaw, &StressMapFile)> {
+        let choice = self.stress_maps.as_ref()?;
+        Some((choice.law, choice.read.as_deref()?))
     }
 
     /// The parameters of the RFT terrain model.

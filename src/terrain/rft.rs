@@ -475,6 +475,21 @@ impl RftTerrain {
         &self.params
     }
 
+    /// Whether every collider on a moving body belongs to one of the terrain's bodies (fixed
+    /// ones, such as the floor, aside): then [`Self::lowest_reach_m`] bounds every moving
+    /// collider.
+    pub fn covers_moving_colliders(&self, bodies: &RigidBodySet, colliders: &ColliderSet) -> bool {
+        colliders
+            .iter()
+            .all(|(_, collider)| match collider.parent() {
+                Some(parent) => {
+                    bodies.get(parent).is_none_or(|b| b.is_fixed())
+                        || self.bodies.iter().any(|b| b.body == parent)
+                }
+                None => true,
+            })
+    }
+
     /// The lowest height (m) an element of any body can reach in a step of `dt_s`
     /// (conservative: from each body's box of element centres and its fastest point).
     pub fn lowest_reach_m(&self, bodies: &RigidBodySet, dt_s: f64) -> f64 {

@@ -8,9 +8,10 @@
 //!   mirrored forces: `alpha_z(-b, pi - g) = alpha_z(b, g)`, `alpha_x(-b, pi - g) =
 //!   -alpha_x(b, g)`; velocities with a backward component (`|gamma| > pi/2`) are mirrored into
 //!   the range;
-//! - vertical motion (`|gamma| = pi/2`) is its own mirror image, so `alpha_x` must be odd in
-//!   beta there: the law's odd part is used (the generic fit has an even residual `Cm11 cos 2b`,
-//!   0.7 % of zeta; a measured table, the noise of its two rows).
+//! - vertical motion (`|gamma| = pi/2`) is its own mirror image, so `alpha_x` must be odd and
+//!   `alpha_z` even in beta there: the law's odd and even parts are used (the generic fit has
+//!   an even residual `Cm11 cos 2b` in alpha_x, 0.7 % of zeta; a measured table, the noise of
+//!   its two rows).
 //!
 //! Two kinds of law:
 //! - [`StressLaw::Fourier`]: Li et al.'s generic Fourier form (their Eq. 1 and supplement),
@@ -79,6 +80,40 @@ pub fn fourier_basis(cos_2b: f64, sin_2b: f64, cos_g: f64, sin_g: f64) -> [[f64;
 }
 
 impl StressCoefficients {
+    /// Checks that every coefficient is finite and that they give a zeta > 0 (the fitted law
+    /// is per unit zeta).
+    pub fn check(&self) -> Result<(), TableError> {
+        let named = [
+            ("a00", self.a00),
+            ("a10", self.a10),
+            ("b11", self.b11),
+            ("b01", self.b01),
+            ("bm11", self.bm11),
+            ("c11", self.c11),
+            ("c01", self.c01),
+            ("cm11", self.cm11),
+            ("d10", self.d10),
+        ];
+        if let Some((name, value)) = named.iter().find(|(_, v)| !v.is_finite()) {
+            return Err(TableError {
+                field: (*name).into(),
+                message: format!("{value} must be finite"),
+            });
+        }
+        let zeta = self.zeta_n_m3();
+        if zeta > 0.0 {
+            Ok(())
+        } else {
+            Err(TableError {
+                field: "a00".into(),
+                message: format!(
+                    "the coefficients give zeta = alpha_z(0, 90 deg) = {zeta} N/m^3; it must \
+                     be > 0 (a00 + a10 + b11 + b01 + bm11)"
+                ),
+            })
+        }
+    }
+
     /// Each coefficient through `f`.
     pub fn map(&self, f: impl Fn(f64) -> f64) -> Self {
         StressCoefficients {
@@ -304,12 +339,14 @@ impl StressLaw {
         }
     }
 
-    /// [`Self::alpha_in_range_cs`] for vertical motion (`cos g = 0`, `sin g = +-1`), with
-    /// alpha_x's part even in beta removed (module docs).
+    /// [`Self::alpha_in_range_cs`] for vertical motion (`cos g = 0`, `sin g = +-1`): its
+    /// mirror image is itself, so alpha_x is the law's part odd in beta and alpha_z its part
+    /// even in beta (module docs; the Fourier form's alpha_z is even there already, to the
+    /// bit).
     pub fn alpha_vertical_cs(&self, cos_2b: f64, sin_2b: f64, sin_g: f64) -> (f64, f64) {
-        let (x_here, z) = self.alpha_in_range_cs(cos_2b, sin_2b, 0.0, sin_g);
-        let (x_mirror, _) = self.alpha_in_range_cs(cos_2b, -sin_2b, 0.0, sin_g);
-        (0.5 * (x_here - x_mirror), z)
+        let (x_here, z_here) = self.alpha_in_range_cs(cos_2b, sin_2b, 0.0, sin_g);
+        let (x_mirror, z_mirror) = self.alpha_in_range_cs(cos_2b, -sin_2b, 0.0, sin_g);
+        (0.5 * (x_here - x_mirror), 0.5 * (z_here + z_mirror))
     }
 
     /// `(alpha_x, alpha_z)` (N/m^3) for attack angle `beta_rad` and intrusion angle
@@ -458,6 +495,15 @@ mod tests {
             let (cx, cz) = coefficients.alpha(b, g);
             assert!((x - cx).abs() < 1e-6 && (z - cz).abs() < 1e-6);
         }
+    }
+
+    #[test]
+    fn coefficients_must_be_finite_and_give_a_positive_zeta() {
+        assert!(GENERIC.scaled(2.0e6).check().is_ok());
+        let mut nan = GENERIC;
+        nan.c01 = f64::NAN;
+        assert_eq!(nan.check().unwrap_err().field, "c01");
+        assert_eq!(GENERIC.scaled(-1.0).check().unwrap_err().field, "a00");
     }
 
     #[test]

@@ -277,6 +277,26 @@ fn significant(v: f64) -> f64 {
     format!("{v:.*e}", FILE_DIGITS - 1).parse().unwrap_or(v)
 }
 
+/// Whether points at `betas_deg` x `gammas_deg` form a table a stress-map file can hold
+/// ([`StressTable::check`]): checked before minutes of measuring for `--write`.
+pub fn check_table_grid(betas_deg: &[f64], gammas_deg: &[f64]) -> Result<(), TableError> {
+    let sorted = |angles: &[f64]| {
+        let mut v = angles.to_vec();
+        v.sort_by(f64::total_cmp);
+        v.dedup();
+        v
+    };
+    let (betas_deg, gammas_deg) = (sorted(betas_deg), sorted(gammas_deg));
+    let rows = vec![vec![0.0; gammas_deg.len()]; betas_deg.len()];
+    StressTable {
+        betas_deg,
+        gammas_deg,
+        alpha_x_n_m3: rows.clone(),
+        alpha_z_n_m3: rows,
+    }
+    .check()
+}
+
 impl StressMaps {
     /// The maps as a file, with `material` (the scene's definition of [`Self::material`]).
     /// The fitted points must form a grid of betas and gammas a [`StressTable`] can hold.
@@ -475,6 +495,17 @@ mod tests {
             "{}",
             fitted.zeta_n_m3()
         );
+    }
+
+    #[test]
+    fn only_grids_a_table_can_hold_may_be_written() {
+        let gammas = [-90.0, -30.0, 30.0, 90.0];
+        assert!(check_table_grid(&[-60.0, 0.0, 60.0, 90.0], &gammas).is_ok());
+        // -90 and 90 deg are the same attack angle: one period holds only one of them.
+        let both_ends = check_table_grid(&[-90.0, 0.0, 90.0], &gammas);
+        assert_eq!(both_ends.unwrap_err().field, "betas_deg");
+        let short = check_table_grid(&[0.0, 45.0], &[-45.0, 0.0, 90.0]);
+        assert_eq!(short.unwrap_err().field, "gammas_deg");
     }
 
     #[test]

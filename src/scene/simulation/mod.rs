@@ -90,8 +90,12 @@ impl Simulation {
         let terrain = match (&robot, config.terrain.model) {
             (Some(robot), TerrainModel::Rft) => {
                 // The `sand` section is not simulated: no solver, no particles.
+                let terrain = robot_terrain(robot, &config.terrain.rft)?;
+                let world = robot.world();
                 Terrain::Rft(Box::new(RftGround {
-                    terrain: robot_terrain(robot, &config.terrain.rft)?,
+                    floor_contacts_switchable: terrain
+                        .covers_moving_colliders(&world.bodies, &world.colliders),
+                    terrain,
                     step_s: config.terrain.rft.step_s(),
                 }))
             }

@@ -13,9 +13,10 @@ use crate::terrain::rft::RftTerrain;
 /// A frame that is a whole number of RFT steps up to this relative round-off takes that number.
 const STEP_COUNT_SLACK: f64 = 1e-6;
 /// On RFT ground the robot's collisions with the rigid floor are detected only while an
-/// element of it may come within this distance (m) of the floor, plus one element size (an
-/// element's centre is within that of its collider's surface); farther away no contact can
-/// form in a step.
+/// element centre may come within one element size plus this distance (m) of the floor.
+/// Every point of a collider lies within about one element size of an element centre (a
+/// face's element reaches half an element's diagonal; a thin leg's sheet, 0.58 of a size
+/// plus half the leg's thickness), so this is the room left for a contact to form in a step.
 const FLOOR_CONTACT_MARGIN_M: f64 = 0.01;
 /// Sand substeps end within this much of the frame's end (s).
 const FRAME_END_TOLERANCE_S: f64 = 1e-12;
@@ -62,6 +63,10 @@ pub struct RftGround {
     pub terrain: RftTerrain,
     /// Largest rapier step, each with one set of RFT forces (s): `terrain.rft.max_dt_s`.
     pub step_s: f64,
+    /// Whether the robot's collisions with the floor may be switched off while it is far
+    /// from it: every moving collider is on a body the terrain bounds
+    /// ([`RftTerrain::covers_moving_colliders`]).
+    pub floor_contacts_switchable: bool,
 }
 
 /// The steps of one frame: adaptive (the sand's CFL and coupling bounds, recomputed every
@@ -177,9 +182,13 @@ impl Terrain {
             Terrain::Rft(rft) => {
                 // RFT needs no colliders: collision detection, most of a rapier step's cost
                 // here, is only for the rigid floor, and only when the robot may reach it.
-                let lowest = rft.terrain.lowest_reach_m(&robot.world().bodies, dt_s);
-                let margin = rft.terrain.params().element_size_m + FLOOR_CONTACT_MARGIN_M;
-                robot.set_floor_contacts(lowest - robot.floor_height_m() < margin);
+                if rft.floor_contacts_switchable {
+                    let lowest = rft.terrain.lowest_reach_m(&robot.world().bodies, dt_s);
+                    let margin = rft.terrain.params().element_size_m + FLOOR_CONTACT_MARGIN_M;
+                    // Negated, so that a NaN height keeps the contacts on.
+                    let far = lowest - robot.floor_height_m() >= margin;
+                    robot.set_floor_contacts(!far);
+                }
                 let world = robot.world_mut();
                 let wrenches =
                     rft.terrain
