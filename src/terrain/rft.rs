@@ -530,15 +530,13 @@ impl RftTerrain {
         for e in &body.elements {
             let centre = to_f64(pose.transform_point(e.centre_m));
             let arm = centre - com;
+            let velocity = linvel + angvel.cross(&arm);
             // Depth at the end of the step if the element keeps its velocity: the force is
-            // `F(d_n) + dt dF/dx v_n`, the explicit half of the linearly implicit spring. The
-            // vertical velocity first (`(w x r).z`): most elements are out of the sand.
-            let velocity_z = linvel.z + (angvel.x * arm.y - angvel.y * arm.x);
-            let depth_m = self.params.surface_height_m - centre.z - dt_s * velocity_z;
+            // `F(d_n) + dt dF/dx v_n`, the explicit half of the linearly implicit spring.
+            let depth_m = self.params.surface_height_m - centre.z - dt_s * velocity.z;
             if depth_m <= 0.0 {
                 continue;
             }
-            let velocity = linvel + angvel.cross(&arm);
             let full = element_stress_n_m2(
                 &self.params,
                 depth_m,

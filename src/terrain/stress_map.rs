@@ -277,9 +277,9 @@ fn significant(v: f64) -> f64 {
     format!("{v:.*e}", FILE_DIGITS - 1).parse().unwrap_or(v)
 }
 
-/// Whether points at `betas_deg` x `gammas_deg` form a table a stress-map file can hold
-/// ([`StressTable::check`]): checked before minutes of measuring for `--write`.
-pub fn check_table_grid(betas_deg: &[f64], gammas_deg: &[f64]) -> Result<(), TableError> {
+/// The table of the grid `betas_deg` x `gammas_deg` (each sorted, repeats dropped), every
+/// value `fill`.
+fn table_of_grid(betas_deg: &[f64], gammas_deg: &[f64], fill: f64) -> StressTable {
     let sorted = |angles: &[f64]| {
         let mut v = angles.to_vec();
         v.sort_by(f64::total_cmp);
@@ -287,14 +287,19 @@ pub fn check_table_grid(betas_deg: &[f64], gammas_deg: &[f64]) -> Result<(), Tab
         v
     };
     let (betas_deg, gammas_deg) = (sorted(betas_deg), sorted(gammas_deg));
-    let rows = vec![vec![0.0; gammas_deg.len()]; betas_deg.len()];
+    let rows = vec![vec![fill; gammas_deg.len()]; betas_deg.len()];
     StressTable {
         betas_deg,
         gammas_deg,
         alpha_x_n_m3: rows.clone(),
         alpha_z_n_m3: rows,
     }
-    .check()
+}
+
+/// Whether points at `betas_deg` x `gammas_deg` form a table a stress-map file can hold
+/// ([`StressTable::check`]): checked before minutes of measuring for `--write`.
+pub fn check_table_grid(betas_deg: &[f64], gammas_deg: &[f64]) -> Result<(), TableError> {
+    table_of_grid(betas_deg, gammas_deg, 0.0).check()
 }
 
 impl StressMaps {
@@ -302,31 +307,15 @@ impl StressMaps {
     /// The fitted points must form a grid of betas and gammas a [`StressTable`] can hold.
     pub fn file(&self, material: serde_yaml_ng::Value) -> Result<StressMapFile, TableError> {
         let points = &self.fit.points;
-        let sorted = |angle: fn(&StressPoint) -> f64| {
-            let mut v: Vec<f64> = points.iter().map(angle).collect();
-            v.sort_by(f64::total_cmp);
-            v.dedup();
-            v
-        };
-        let betas_deg = sorted(|p| p.beta_deg);
-        let gammas_deg = sorted(|p| p.gamma_deg);
-        let mut rows = [
-            vec![vec![f64::NAN; gammas_deg.len()]; betas_deg.len()],
-            vec![vec![f64::NAN; gammas_deg.len()]; betas_deg.len()],
-        ];
+        let betas: Vec<f64> = points.iter().map(|p| p.beta_deg).collect();
+        let gammas: Vec<f64> = points.iter().map(|p| p.gamma_deg).collect();
+        let mut table = table_of_grid(&betas, &gammas, f64::NAN);
         for p in points {
-            let i = betas_deg.partition_point(|&b| b < p.beta_deg);
-            let j = gammas_deg.partition_point(|&g| g < p.gamma_deg);
-            rows[0][i][j] = significant(p.alpha_x_n_m3);
-            rows[1][i][j] = significant(p.alpha_z_n_m3);
+            let i = table.betas_deg.partition_point(|&b| b < p.beta_deg);
+            let j = table.gammas_deg.partition_point(|&g| g < p.gamma_deg);
+            table.alpha_x_n_m3[i][j] = significant(p.alpha_x_n_m3);
+            table.alpha_z_n_m3[i][j] = significant(p.alpha_z_n_m3);
         }
-        let [alpha_x_n_m3, alpha_z_n_m3] = rows;
-        let table = StressTable {
-            betas_deg,
-            gammas_deg,
-            alpha_x_n_m3,
-            alpha_z_n_m3,
-        };
         // A missing (beta, gamma) pair is left NaN, which the check names.
         table.check()?;
         Ok(StressMapFile {
